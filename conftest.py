@@ -1,0 +1,62 @@
+"""Test fixtures shared by every package's tests and the integration tests in tests/.
+
+Every test runs with DDS discovery limited to this host and a ROS_DOMAIN_ID of its own, so tests never see each
+other's nodes (nor anything else on the machine) and no traffic leaves loopback.
+"""
+from __future__ import annotations
+
+import itertools
+import os
+import time
+from typing import Callable, Iterator
+
+import pytest
+
+# 1..101 are the domain ids whose DDS ports fit below Linux's ephemeral port range. Start at a pid-dependent
+# offset so that two test runs on one machine are unlikely to share a domain at the same moment.
+_FIRST_DOMAIN = 1
+_DOMAIN_COUNT = 101
+_domain_ids = itertools.count(os.getpid() % _DOMAIN_COUNT)
+
+
+def next_domain_id() -> int:
+    return _FIRST_DOMAIN + next(_domain_ids) % _DOMAIN_COUNT
+
+
+@pytest.fixture(autouse=True)
+def ros_isolation(monkeypatch: pytest.MonkeyPatch) -> str:
+    """Give this test localhost-only discovery and its own ROS_DOMAIN_ID (inherited by any process it starts)."""
+    domain_id = str(next_domain_id())
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv('ROS_DOMAIN_ID', domain_id)
+    monkeypatch.delenv('ROS_LOCALHOST_ONLY', raising=False)
+    return domain_id
+
+
+@pytest.fixture
+def ros_context(ros_isolation: str) -> Iterator[object]:
+    """An initialised rclpy context for this test only; nodes take it as `context=`."""
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(context=context, domain_id=int(ros_isolation))
+    try:
+        yield context
+    finally:
+        context.try_shutdown()
+
+
+@pytest.fixture
+def spin_until() -> Callable[..., bool]:
+    """spin_until(executor, predicate, timeout=10.0) -> bool: spin until predicate() holds or the timeout passes."""
+
+    def _spin_until(executor, predicate: Callable[[], bool], timeout: float = 10.0) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            executor.spin_once(timeout_sec=0.05)
+        return predicate()
+
+    return _spin_until

@@ -1,0 +1,1 @@
+"""Language model programs: prompts, hierarchical code generation, sandboxed execution, LLM clients, lmp_node."""

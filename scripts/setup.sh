@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# One-command setup: .venv with pinned ROS 2 Jazzy wheels and dependencies, the wheel fixes, colcon build.
+# Safe to run again: steps whose inputs did not change are skipped.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+VENV=$ROOT/.venv
+PYTHON=${PYTHON:-python3.11}
+step() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
+
+command -v "$PYTHON" >/dev/null || PYTHON=python3
+if [ ! -x "$VENV/bin/python" ]; then
+  step "creating $VENV with $($PYTHON --version)"
+  "$PYTHON" -m venv "$VENV"
+else
+  step "using existing $VENV"
+fi
+
+req_hash=$(cat requirements.txt requirements-runtime.txt constraints.txt | sha1sum | cut -d' ' -f1)
+if [ "$(cat "$VENV/.cap-requirements" 2>/dev/null)" != "$req_hash" ]; then
+  step "installing pinned packages (requirements*.txt, constraints.txt)"
+  "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r requirements.txt -c constraints.txt
+  echo "$req_hash" > "$VENV/.cap-requirements"
+else
+  step "pinned packages already installed"
+fi
+
+step "fixing the ROS wheels' CMake exports"
+"$VENV/bin/python" scripts/fix_ros_wheels.py
+
+# Build inputs only: with --symlink-install, edits to Python modules need no rebuild, while manifests, setup files,
+# interface definitions, resources and config do.
+src_hash=$( (find ros_ws/src -type f \( -name package.xml -o -name setup.py -o -name setup.cfg -o -name CMakeLists.txt \
+    -o -name '*.msg' -o -name '*.srv' -o -name '*.action' -o -path '*/resource/*' -o -path '*/config/*' \
+    -o -path '*/launch/*' \) -print0 | sort -z | xargs -0 sha1sum; echo "$req_hash") | sha1sum | cut -d' ' -f1)
+if [ "$(cat ros_ws/install/.cap-source 2>/dev/null)" != "$src_hash" ]; then
+  step "building ros_ws with colcon"
+  (
+    export VIRTUAL_ENV=$VENV PATH=$VENV/bin:$PATH
+    # The venv is the ament prefix: without this CMake finds no rosidl package (ROS_ON_PIP.md, fix 1).
+    export AMENT_PREFIX_PATH=$VENV CMAKE_PREFIX_PATH=$VENV
+    cd ros_ws
+    colcon --log-base log build --symlink-install --event-handlers console_cohesion- summary+ \
+      --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF
+  )
+  echo "$src_hash" > ros_ws/install/.cap-source
+else
+  step "ros_ws is up to date"
+fi
+step "done; use it with: source scripts/env.sh"
