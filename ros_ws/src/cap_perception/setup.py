@@ -22,6 +22,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'perception_node = cap_perception.perception_node:main',
         ],
     },
 )

@@ -1,0 +1,90 @@
+"""Interchangeable object sources behind the perception services.
+
+Every source answers the same two questions — which objects are there, and what is the state of one of them — from
+its latest snapshot. The node decides which source feeds the services; the answers do not depend on that choice.
+"""
+from __future__ import annotations
+
+import pathlib
+import threading
+from typing import Iterable, Sequence
+
+import yaml
+
+from cap_perception.names import UnknownObjectError, resolve_name
+from cap_perception.objects import PerceivedObject
+
+
+class NoObservationError(RuntimeError):
+    """Raised when a source has not received any observation yet (e.g. the simulator or camera is not up)."""
+
+
+class SnapshotSource:
+    """Holds the latest full list of objects; fed by whoever observes the world (ground truth, a detector).
+
+    Thread-safe: the node's subscription callbacks update it while service callbacks read it.
+    """
+
+    def __init__(self, description: str) -> None:
+        self.description = description
+        self._lock = threading.Lock()
+        self._objects: dict[str, PerceivedObject] | None = None
+        self._stamp = 0.0
+
+    def update(self, objects: Iterable[PerceivedObject], stamp: float) -> None:
+        snapshot = {obj.name: obj for obj in objects}
+        with self._lock:
+            self._objects, self._stamp = snapshot, stamp
+
+    @property
+    def stamp(self) -> float:
+        """Time [s] of the latest observation (simulated time when the graph runs on /clock)."""
+        with self._lock:
+            return self._stamp
+
+    def _snapshot(self) -> dict[str, PerceivedObject]:
+        with self._lock:
+            objects = self._objects
+        if objects is None:
+            raise NoObservationError(f'No objects observed yet from {self.description}; is it running?')
+        return objects
+
+    def names(self, visible_only: bool = False) -> list[str]:
+        """Canonical names, sorted."""
+        return sorted(name for name, obj in self._snapshot().items() if obj.visible or not visible_only)
+
+    def state(self, name: str) -> PerceivedObject:
+        """The object `name` refers to ("the red block", "red_block", ...); UnknownObjectError otherwise."""
+        objects = self._snapshot()
+        return objects[resolve_name(name, objects)]
+
+
+def load_stub_objects(path: str | pathlib.Path) -> list[PerceivedObject]:
+    """Objects listed in a YAML file:
+
+        objects:
+          - {color: red, category: block, position: [0.1, -0.5, 0.02], size: [0.04, 0.04, 0.04]}
+          - {color: blue, category: bowl, position: [-0.1, -0.4, 0.03], size: [0.14, 0.14, 0.06], visible: true}
+    """
+    path = pathlib.Path(path)
+    try:
+        document = yaml.safe_load(path.read_text(encoding='utf-8')) or {}
+    except (OSError, yaml.YAMLError) as error:
+        raise ValueError(f'cannot read the object stub file {path}: {error}') from error
+    entries: Sequence = document.get('objects', []) if isinstance(document, dict) else []
+    objects = []
+    for index, entry in enumerate(entries):
+        try:
+            objects.append(PerceivedObject.from_fields(
+                color_name=entry['color'], category=entry['category'], position=entry['position'],
+                size=entry.get('size', (0.04, 0.04, 0.04)), visible=bool(entry.get('visible', True))))
+        except (KeyError, TypeError, ValueError) as error:
+            raise ValueError(f'{path}: object #{index + 1} is invalid: {error}') from error
+    names = [obj.name for obj in objects]
+    duplicates = sorted({name for name in names if names.count(name) > 1})
+    if duplicates:
+        raise ValueError(f'{path}: object names must be unique; repeated: {", ".join(duplicates)}')
+    return objects
+
+
+__all__ = ['NoObservationError', 'SnapshotSource', 'UnknownObjectError', 'load_stub_objects']

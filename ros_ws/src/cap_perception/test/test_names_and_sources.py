@@ -1,0 +1,71 @@
+"""Object names as users type them, and the sources behind the perception services."""
+import pytest
+
+from cap_perception.names import UnknownObjectError, canonical_name, resolve_name
+from cap_perception.objects import PerceivedObject
+from cap_perception.sources import NoObservationError, SnapshotSource, load_stub_objects
+
+
+@pytest.mark.parametrize('typed', ['red block', 'the red block', 'Red_Block', 'THE  red-block', 'red cube'])
+def test_typed_names_mean_the_canonical_name(typed):
+    assert resolve_name(typed, ['red block', 'red bowl', 'blue block']) == 'red block'
+
+
+def test_grey_is_gray():
+    assert canonical_name('the grey bowl') == 'gray bowl'
+
+
+def test_unknown_name_error_lists_known_objects_and_a_close_match():
+    with pytest.raises(UnknownObjectError) as error:
+        resolve_name('red blok', ['red block', 'blue bowl'])
+    assert "'red blok'" in str(error.value)
+    assert "Did you mean 'red block'?" in str(error.value)
+    assert 'blue bowl' in str(error.value)
+
+
+def test_unknown_colour_gets_no_guess():
+    with pytest.raises(UnknownObjectError, match='Known objects: blue bowl, red block') as error:
+        resolve_name('purple block', ['red block', 'blue bowl'])
+    assert 'Did you mean' not in str(error.value)
+
+
+def test_snapshot_source_answers_from_its_latest_update():
+    source = SnapshotSource('a test feed')
+    with pytest.raises(NoObservationError, match='a test feed'):
+        source.names()
+    red = PerceivedObject.from_fields('red', 'block', (0.1, -0.5, 0.02), (0.04, 0.04, 0.04))
+    hidden = PerceivedObject.from_fields('blue', 'bowl', (-0.1, -0.4, 0.03), (0.14, 0.14, 0.06), visible=False)
+    source.update([red, hidden], stamp=2.5)
+    assert source.names() == ['blue bowl', 'red block']
+    assert source.names(visible_only=True) == ['red block']
+    assert source.state('the Red_Block').bbox_min == pytest.approx((0.08, -0.52, 0.0))
+    source.update([hidden], stamp=3.0)
+    with pytest.raises(UnknownObjectError):
+        source.state('red block')
+    assert source.stamp == 3.0
+
+
+def test_stub_file_loads_objects(tmp_path):
+    stub = tmp_path / 'objects.yaml'
+    stub.write_text('objects:\n'
+                    '  - {color: green, category: block, position: [0.0, -0.6, 0.02]}\n'
+                    '  - {color: yellow, category: bowl, position: [0.1, -0.4, 0.03], size: [0.14, 0.14, 0.06]}\n')
+    objects = load_stub_objects(stub)
+    assert [obj.name for obj in objects] == ['green block', 'yellow bowl']
+    assert objects[0].bbox_max == pytest.approx((0.02, -0.58, 0.04))
+    assert objects[1].color_rgba[:3] == pytest.approx((237 / 255, 201 / 255, 72 / 255))
+
+
+@pytest.mark.parametrize('body, complaint', [
+    ('objects:\n  - {color: magenta, category: block, position: [0, -0.5, 0.02]}\n', 'unknown colour'),
+    ('objects:\n  - {color: red, category: sphere, position: [0, -0.5, 0.02]}\n', 'unknown object category'),
+    ('objects:\n  - {color: red, category: block}\n', 'object #1 is invalid'),
+    ('objects:\n  - {color: red, category: block, position: [0, 0, 0]}\n'
+     '  - {color: red, category: block, position: [0.2, 0, 0]}\n', 'repeated: red block'),
+    ('objects: [unclosed\n', 'cannot read'),
+])
+def test_bad_stub_files_are_refused_with_a_reason(tmp_path, body, complaint):
+    stub = tmp_path / 'objects.yaml'
+    stub.write_text(body)
+    with pytest.raises(ValueError, match=complaint):
+        load_stub_objects(stub)

@@ -1,0 +1,79 @@
+"""perception_node over DDS: the services answer from the simulator's object array or from a stub file."""
+import pytest
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from cap_interfaces.msg import GraphNames, ObjectArray
+from cap_interfaces.srv import GetObjectNames, GetObjectState
+from cap_perception.objects import PerceivedObject
+from cap_perception.perception_node import OBJECTS_QOS, PerceptionNode
+from cap_perception.ros_conversions import to_msg
+
+
+@pytest.fixture
+def graph(ros_context):
+    nodes = []
+    executor = MultiThreadedExecutor(context=ros_context)
+
+    def add(node):
+        nodes.append(node)
+        executor.add_node(node)
+        return node
+
+    yield add, executor
+    executor.shutdown()
+    for node in nodes:
+        node.destroy_node()
+
+
+def _call(executor, spin_until, client, request):
+    assert spin_until(executor, client.service_is_ready)
+    future = client.call_async(request)
+    assert spin_until(executor, future.done)
+    return future.result()
+
+
+def test_ground_truth_objects_are_served_by_name(ros_context, graph, spin_until):
+    add, executor = graph
+    add(PerceptionNode(context=ros_context))
+    user = add(Node('perception_user', context=ros_context))
+    names = user.create_client(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE)
+    state = user.create_client(GetObjectState, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE)
+
+    assert _call(executor, spin_until, names, GetObjectNames.Request()).names == []
+    simulator = user.create_publisher(ObjectArray, GraphNames.SIM_OBJECTS_TOPIC, OBJECTS_QOS)
+    array = ObjectArray()
+    array.header.frame_id = 'world'
+    array.objects = [to_msg(PerceivedObject.from_fields('red', 'block', (0.1, -0.5, 0.02), (0.04,) * 3)),
+                     to_msg(PerceivedObject.from_fields('blue', 'bowl', (-0.1, -0.4, 0.03), (0.14, 0.14, 0.06)))]
+    assert spin_until(executor, lambda: simulator.get_subscription_count() == 1)
+    simulator.publish(array)
+    assert spin_until(executor, lambda: _call(executor, spin_until, names, GetObjectNames.Request()).names
+                      == ['blue bowl', 'red block'])
+
+    answer = _call(executor, spin_until, state, GetObjectState.Request(name='the Red_Block'))
+    assert answer.success
+    assert (answer.state.position.x, answer.state.position.y) == pytest.approx((0.1, -0.5))
+    assert answer.state.bbox_max.z == pytest.approx(0.04)
+
+    unknown = _call(executor, spin_until, state, GetObjectState.Request(name='green block'))
+    assert not unknown.success
+    assert "no object called 'green block'" in unknown.message and 'red block' in unknown.message
+
+
+def test_stub_source_serves_the_file(ros_context, graph, spin_until, tmp_path):
+    stub = tmp_path / 'objects.yaml'
+    stub.write_text('objects:\n  - {color: green, category: block, position: [0.0, -0.6, 0.02], visible: false}\n')
+    add, executor = graph
+    add(PerceptionNode(context=ros_context, parameter_overrides=[
+        Parameter('source', value='stub'), Parameter('stub_file', value=str(stub))]))
+    user = add(Node('perception_user', context=ros_context))
+    names = user.create_client(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE)
+    assert _call(executor, spin_until, names, GetObjectNames.Request()).names == ['green block']
+    assert _call(executor, spin_until, names, GetObjectNames.Request(visible_only=True)).names == []
+
+
+def test_unknown_source_is_refused_at_start(ros_context):
+    with pytest.raises(ValueError, match='not one of'):
+        PerceptionNode(context=ros_context, parameter_overrides=[Parameter('source', value='lidar')])
