@@ -1,0 +1,1 @@
+"""The paper's simulated table-top benchmark: episodes, instructions, success checks and oracle programs."""

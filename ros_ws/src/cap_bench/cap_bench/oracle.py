@@ -1,0 +1,110 @@
+"""Reference programs: one per template, written against the robot API seen by generated code (DESIGN.md §5).
+
+Given an episode's attribute values (not its resolved referents), each program finds what the instruction refers to
+through the API at run time, exactly as a model-written program would, and is executed through the same sandboxed
+path. Their success rate measures the robot stack alone.
+"""
+from __future__ import annotations
+
+from cap_bench import table
+from cap_bench.episodes import MAGNITUDE_DISTANCES, ORDINALS, Episode
+
+# Named positions in normalised table coordinates ([0, 0] bottom left, [1, 1] top right).
+NORMALISED_POSITIONS = {
+    'top left corner': (0.0, 1.0), 'top side': (0.5, 1.0), 'top right corner': (1.0, 1.0),
+    'left side': (0.0, 0.5), 'middle': (0.5, 0.5), 'right side': (1.0, 0.5),
+    'bottom left corner': (0.0, 0.0), 'bottom side': (0.5, 0.0), 'bottom right corner': (1.0, 0.0),
+}
+
+_BLOCKS = "block_names = [name for name in get_obj_names() if name.endswith('block')]\n"
+_BOWLS = "bowl_names = [name for name in get_obj_names() if name.endswith('bowl')]\n"
+
+
+def _position(name: str) -> str:
+    return f'denormalize_xy({list(NORMALISED_POSITIONS[name])})'
+
+
+def _unit(direction: str) -> str:
+    return f'np.array({list(table.DIRECTIONS[direction])})'
+
+
+def oracle_program(episode: Episode) -> str:
+    """The reference program for this episode's template and attribute values."""
+    a = episode.attributes
+    template = episode.template
+    if template == 'pick_place':
+        return f"put_first_on_second({a['block1']!r}, {a['target']!r})\n"
+    if template == 'stack':
+        return (_BLOCKS + "for lower, upper in zip(block_names, block_names[1:]):\n"
+                          "    put_first_on_second(upper, lower)\n")
+    if template == 'blocks_on_corner':
+        return (_BLOCKS + f"target_xy = {_position(a['corner_side'])}\n"
+                          "for name in block_names:\n    put_first_on_second(name, target_xy)\n")
+    if template == 'blocks_in_bowl':
+        return _BLOCKS + f"for name in block_names:\n    put_first_on_second(name, {a['bowl']!r})\n"
+    if template == 'matching_bowls':
+        return (_BLOCKS + "for name in block_names:\n"
+                          "    put_first_on_second(name, name.replace('block', 'bowl'))\n")
+    if template == 'mismatched_bowls':
+        return (_BLOCKS + _BOWLS + "load = {bowl: 0 for bowl in bowl_names}\n"
+                "for name in block_names:\n"
+                "    others = [bowl for bowl in bowl_names if bowl.split()[0] != name.split()[0]]\n"
+                "    bowl = min(others, key=lambda b: load[b])\n"
+                "    load[bowl] += 1\n"
+                "    put_first_on_second(name, bowl)\n")
+    if template == 'block_by_direction':
+        return (_BLOCKS + f"bowl_xy = get_obj_pos({a['bowl']!r})\n"
+                f"ahead = [np.dot(get_obj_pos(name) - bowl_xy, {_unit(a['direction'])}) for name in block_names]\n"
+                "block = block_names[int(np.argmax(ahead))]\n"
+                f"put_first_on_second(block, {_position(a['corner_side'])})\n")
+    if template == 'block_by_distance':
+        pick = 'argmax' if a['distance'] == 'farthest' else 'argmin'
+        return (_BLOCKS + f"bowl_xy = get_obj_pos({a['bowl']!r})\n"
+                "distances = [np.linalg.norm(get_obj_pos(name) - bowl_xy) for name in block_names]\n"
+                f"block = block_names[int(np.{pick}(distances))]\n"
+                f"put_first_on_second(block, {_position(a['corner_side'])})\n")
+    if template == 'nth_block':
+        return (_BLOCKS + f"ordered = sorted(block_names, key=lambda name: -np.dot(get_obj_pos(name), "
+                f"{_unit(a['direction'])}))\n"
+                f"put_first_on_second(ordered[{ORDINALS[a['nth']]}], {_position(a['corner_side'])})\n")
+    if template == 'different_corners':
+        corners = ', '.join(_position(c) for c in table.CORNERS)
+        return (_BLOCKS + f"corners = [{corners}]\n"
+                          "for name, corner in zip(block_names, corners):\n    put_first_on_second(name, corner)\n")
+    if template == 'stack_on_corner':
+        return (_BLOCKS + f"put_first_on_second(block_names[0], {_position(a['corner_side'])})\n"
+                          "for lower, upper in zip(block_names, block_names[1:]):\n"
+                          "    put_first_on_second(upper, lower)\n")
+    if template == 'place_by_magnitude':
+        distance = MAGNITUDE_DISTANCES[a['magnitude']]
+        return (f"target_xy = get_obj_pos({a['bowl']!r}) + {_unit(a['direction'])} * {distance}\n"
+                f"put_first_on_second({a['block1']!r}, target_xy)\n")
+    if template == 'corner_by_distance':
+        pick = 'max' if a['distance'] == 'farthest' else 'min'
+        corners = ', '.join(_position(c) for c in table.CORNERS)
+        return (f"bowl_xy = get_obj_pos({a['bowl']!r})\n"
+                f"corner = {pick}([{corners}], key=lambda xy: np.linalg.norm(xy - bowl_xy))\n"
+                f"put_first_on_second({a['block1']!r}, corner)\n")
+    if template == 'line':
+        return _BLOCKS + _line_program(a['line'])
+    raise ValueError(f'no reference program for template {template!r}')
+
+
+def _line_program(kind: str) -> str:
+    # Blocks 0.1 m apart along the line; the line is shifted across the table to where it keeps farthest from the
+    # objects as they stand, so that no block lands on a bowl's rim or on a block still waiting to be moved.
+    if kind == 'horizontal':
+        points, shift = 'np.column_stack([offsets, np.zeros(len(offsets))])', '[0.0, 1.0]'
+    elif kind == 'vertical':
+        points, shift = 'np.column_stack([np.zeros(len(offsets)), offsets])', '[1.0, 0.0]'
+    else:
+        points, shift = 'np.column_stack([offsets, offsets]) / np.sqrt(2)', '[1.0, -1.0]'
+    return ("offsets = (np.arange(len(block_names)) - (len(block_names) - 1) / 2) * 0.1\n"
+            f"line = {points} + np.array([0.0, -0.5])\n"
+            f"shift_direction = np.array({shift}) / np.linalg.norm({shift})\n"
+            "others = [get_obj_pos(name) for name in get_obj_names()]\n"
+            "def clearance(shift):\n"
+            "    return min(np.linalg.norm(p - o) for p in line + shift * shift_direction for o in others)\n"
+            "best = max(np.linspace(-0.2, 0.2, 41), key=clearance)\n"
+            "for name, xy in zip(block_names, line + best * shift_direction):\n"
+            "    put_first_on_second(name, xy)\n")
