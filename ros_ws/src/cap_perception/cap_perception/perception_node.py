@@ -1,56 +1,130 @@
 """perception_node: the object services of the graph over one interchangeable source.
 
-Parameters choose the source: `ground_truth` (the simulator's object array), `stub` (a YAML file) or `rgbd`
-(the colour detector on the bridge's camera images, when available).
+The `source` parameter chooses where objects come from: `ground_truth` (the simulator's object array), `rgbd` (the
+colour detector on one camera's colour and depth images) or `stub` (a YAML file).
 """
 from __future__ import annotations
 
+import threading
+
+import numpy as np
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import CameraInfo, Image
 
 from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import GetObjectNames, GetObjectState
-from cap_perception.ros_conversions import from_msg, to_msg
-from cap_perception.sources import NoObservationError, SnapshotSource, UnknownObjectError, load_stub_objects
+from cap_perception.rgbd_detector import CameraView, DetectorConfig, detect
+from cap_perception.ros_conversions import from_msg, image_to_array, to_msg
+from cap_perception.sources import (NoObservationError, SnapshotSource, UnknownObjectError, load_stub_objects,
+                                    remember_unseen)
 
-SOURCES = ('ground_truth', 'stub')
+SOURCES = ('ground_truth', 'rgbd', 'stub')
 
 # Only the latest object array matters: keep one, reliably delivered.
 OBJECTS_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 
 
+def _stamp_seconds(header) -> float:
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
 class PerceptionNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('perception_node', **kwargs)
-        source = self.declare_parameter('source', 'ground_truth', ParameterDescriptor(
-            description='Where objects come from: ground_truth (simulator object array) or stub (YAML file).')).value
-        stub_file = self.declare_parameter('stub_file', '', ParameterDescriptor(
-            description='YAML file of objects for source=stub.')).value
+        source = self._parameter('source', 'ground_truth',
+                                 'Where objects come from: ground_truth (simulator object array), rgbd (colour '
+                                 'detector on camera images) or stub (YAML file).')
+        stub_file = self._parameter('stub_file', '', 'YAML file of objects for source=stub.')
         if source not in SOURCES:
             raise ValueError(f'parameter source={source!r} is not one of {", ".join(SOURCES)}')
-        self.source = SnapshotSource(
-            'the simulator ground truth' if source == 'ground_truth' else f'the stub file {stub_file!r}')
+        self.source = SnapshotSource({'ground_truth': 'the simulator ground truth',
+                                      'rgbd': 'the RGB-D detector', 'stub': f'the stub file {stub_file!r}'}[source])
         if source == 'stub':
             if not stub_file:
                 raise ValueError('parameter stub_file is required when source=stub')
             self.source.update(load_stub_objects(stub_file), stamp=0.0)
-        else:
+        elif source == 'ground_truth':
             self.create_subscription(ObjectArray, GraphNames.SIM_OBJECTS_TOPIC, self._on_objects, OBJECTS_QOS)
-        self.create_service(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE, self._on_names)
-        self.create_service(GetObjectState, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE, self._on_state)
+        else:
+            self._start_detector()
+        # Services answer from the latest snapshot; their own group keeps them responsive while a frame is analysed.
+        services = MutuallyExclusiveCallbackGroup()
+        self.create_service(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE, self._on_names,
+                            callback_group=services)
+        self.create_service(GetObjectState, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE, self._on_state,
+                            callback_group=services)
         self.get_logger().info(f'serving objects from {self.source.description}')
 
-    def _on_objects(self, msg: ObjectArray) -> None:
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        self.source.update((from_msg(obj) for obj in msg.objects), stamp)
+    def _parameter(self, name: str, default, description: str):
+        return self.declare_parameter(name, default, ParameterDescriptor(description=description)).value
 
+    # ------------------------------------------------------------------------------------------ ground truth
+    def _on_objects(self, msg: ObjectArray) -> None:
+        self.source.update((from_msg(obj) for obj in msg.objects), _stamp_seconds(msg.header))
+
+    # ------------------------------------------------------------------------------------------ RGB-D detector
+    def _start_detector(self) -> None:
+        camera = self._parameter('camera', 'top', 'Camera whose images the detector reads '
+                                 '(topics <camera namespace>/<camera>/{color,depth,camera_info}).')
+        position = self._parameter('camera_position', [0.0, -0.5, 1.0],
+                                   'Camera optical frame origin in the world frame [m] (extrinsic calibration).')
+        orientation = self._parameter('camera_orientation', [1.0, 0.0, 0.0, 0.0],
+                                      'Camera optical frame orientation in the world frame, quaternion x, y, z, w '
+                                      '(ROS optical convention: +z forward, +y down).')
+        self._world_from_optical = np.eye(4)
+        self._world_from_optical[:3, :3] = Rotation.from_quat(orientation).as_matrix()
+        self._world_from_optical[:3, 3] = position
+        self._detector_config = DetectorConfig()
+        self._frames_lock = threading.Lock()
+        self._color: Image | None = None
+        self._depth: Image | None = None
+        self._camera_matrix: np.ndarray | None = None
+        self._last_detected_stamp = -1.0
+        prefix = f'{GraphNames.CAMERA_NAMESPACE}/{camera}'
+        # Images are sensor data: the latest frame matters, a lost one is replaced by the next.
+        images = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(Image, f'{prefix}/color', lambda m: self._on_image('color', m),
+                                 qos_profile_sensor_data, callback_group=images)
+        self.create_subscription(Image, f'{prefix}/depth', lambda m: self._on_image('depth', m),
+                                 qos_profile_sensor_data, callback_group=images)
+        self.create_subscription(CameraInfo, f'{prefix}/camera_info', self._on_camera_info,
+                                 qos_profile_sensor_data, callback_group=images)
+
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        self._camera_matrix = np.array(msg.k, dtype=float).reshape(3, 3)
+
+    def _on_image(self, kind: str, msg: Image) -> None:
+        with self._frames_lock:
+            setattr(self, f'_{kind}', msg)
+            color, depth = self._color, self._depth
+        # Colour and depth of one frame carry the same stamp; analyse each frame once.
+        if color is None or depth is None or self._camera_matrix is None or color.header.stamp != depth.header.stamp:
+            return
+        stamp = _stamp_seconds(color.header)
+        if stamp <= self._last_detected_stamp:
+            return
+        self._last_detected_stamp = stamp
+        try:
+            view = CameraView(image_to_array(color), image_to_array(depth), self._camera_matrix,
+                              self._world_from_optical)
+        except ValueError as error:
+            self.get_logger().error(str(error), throttle_duration_sec=5.0)
+            return
+        detected = detect(view, self._detector_config)
+        self.source.update(remember_unseen(self.source.objects(), detected), stamp)
+
+    # ------------------------------------------------------------------------------------------ services
     def _on_names(self, request: GetObjectNames.Request, response: GetObjectNames.Response):
         try:
             response.names = self.source.names(visible_only=request.visible_only)
         except NoObservationError as error:
-            self.get_logger().warning(str(error))
+            self.get_logger().warning(str(error), throttle_duration_sec=5.0)
             response.names = []
         return response
 
@@ -67,10 +141,13 @@ class PerceptionNode(Node):
 def main(args=None) -> None:
     rclpy.init(args=args)
     node = PerceptionNode()
+    executor = MultiThreadedExecutor(num_threads=2)
+    executor.add_node(node)
     try:
-        rclpy.spin(node)
+        executor.spin()
     except KeyboardInterrupt:
         pass
     finally:
+        executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()

@@ -5,6 +5,7 @@ its latest snapshot. The node decides which source feeds the services; the answe
 """
 from __future__ import annotations
 
+import dataclasses
 import pathlib
 import threading
 from typing import Iterable, Sequence
@@ -58,6 +59,21 @@ class SnapshotSource:
         objects = self._snapshot()
         return objects[resolve_name(name, objects)]
 
+    def objects(self) -> list[PerceivedObject]:
+        """Every object of the latest snapshot (empty before the first observation)."""
+        with self._lock:
+            return list(self._objects.values()) if self._objects else []
+
+
+def remember_unseen(previous: Iterable[PerceivedObject], seen: Iterable[PerceivedObject]) -> list[PerceivedObject]:
+    """What a camera sees now, plus every earlier object it no longer sees (hidden under another, or behind the arm),
+    kept at its last known place and marked not visible: objects do not vanish because they are occluded."""
+    current = {obj.name: obj for obj in seen}
+    for obj in previous:
+        if obj.name not in current:
+            current[obj.name] = dataclasses.replace(obj, visible=False)
+    return sorted(current.values(), key=lambda obj: obj.name)
+
 
 def load_stub_objects(path: str | pathlib.Path) -> list[PerceivedObject]:
     """Objects listed in a YAML file:
@@ -87,4 +103,4 @@ def load_stub_objects(path: str | pathlib.Path) -> list[PerceivedObject]:
     return objects
 
 
-__all__ = ['NoObservationError', 'SnapshotSource', 'UnknownObjectError', 'load_stub_objects']
+__all__ = ['NoObservationError', 'SnapshotSource', 'UnknownObjectError', 'load_stub_objects', 'remember_unseen']

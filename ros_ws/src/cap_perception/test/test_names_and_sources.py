@@ -3,7 +3,7 @@ import pytest
 
 from cap_perception.names import UnknownObjectError, canonical_name, resolve_name
 from cap_perception.objects import PerceivedObject
-from cap_perception.sources import NoObservationError, SnapshotSource, load_stub_objects
+from cap_perception.sources import NoObservationError, SnapshotSource, load_stub_objects, remember_unseen
 
 
 @pytest.mark.parametrize('typed', ['red block', 'the red block', 'Red_Block', 'THE  red-block', 'red cube'])
@@ -69,3 +69,12 @@ def test_bad_stub_files_are_refused_with_a_reason(tmp_path, body, complaint):
     stub.write_text(body)
     with pytest.raises(ValueError, match=complaint):
         load_stub_objects(stub)
+
+
+def test_objects_hidden_from_the_camera_stay_known_as_not_visible():
+    red = PerceivedObject.from_fields('red', 'block', (0.1, -0.5, 0.02), (0.04,) * 3)
+    blue = PerceivedObject.from_fields('blue', 'block', (0.0, -0.4, 0.02), (0.04,) * 3)
+    moved_red = PerceivedObject.from_fields('red', 'block', (0.0, -0.4, 0.06), (0.04,) * 3)
+    merged = remember_unseen([red, blue], [moved_red])  # red now sits on blue and hides it
+    assert [(o.name, o.visible, o.position) for o in merged] == [
+        ('blue block', False, blue.position), ('red block', True, moved_red.position)]

@@ -1,0 +1,152 @@
+"""Finds the table-top's coloured blocks and bowls in one RGB-D image (OpenCV + NumPy, no learning).
+
+1. Deproject every pixel with the depth image, the intrinsics and the camera pose into the world frame and keep
+   what stands on the table (above its surface, inside its bounds).
+2. Label each kept pixel with the nearest palette colour by chromaticity: dividing RGB by its largest channel
+   cancels most of the shading, which scales all channels alike.
+3. Per colour, join the labelled pixels into connected regions and regions into objects by distance in the world.
+4. Tell a block from a bowl by size: a block spans about one block edge, a bowl three times that. A bowl may hold
+   a block of its own colour: that block shows as a cluster near the bowl's centre standing higher than its floor.
+
+Works best from above (the `top` camera): every block's top face and every bowl's floor is seen. A block hidden
+under another is not detected; the perception source keeps it as not visible at its last known place.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from cap_perception.names import PALETTE
+from cap_perception.objects import PerceivedObject
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    block_size: float = 0.04  # cube edge [m]
+    bowl_diameter: float = 0.13  # across the rim [m]
+    table_x: tuple[float, float] = (-0.3, 0.3)
+    table_y: tuple[float, float] = (-0.8, -0.2)
+    min_height: float = 0.004  # above the table surface [m]; lower points are table
+    max_height: float = 0.30  # higher points are the robot, not objects [m]
+    max_color_distance: float = 0.22  # in normalised-RGB units; farther pixels are not an object colour
+    min_brightness: int = 35  # darker pixels carry no reliable colour (shadowed sides, the robot)
+    min_pixels: int = 25  # smaller regions are noise
+    join_distance: float = 0.05  # regions of one colour closer than this in the world are one object [m]
+
+
+@dataclass(frozen=True)
+class CameraView:
+    """One RGB-D frame with its geometry."""
+
+    rgb: np.ndarray  # (H, W, 3) uint8
+    depth: np.ndarray  # (H, W) float32, metres along the optical axis; 0 or nan = no reading
+    camera_matrix: np.ndarray  # 3x3 K
+    world_from_optical: np.ndarray  # 4x4 pose of the ROS optical frame in the world frame
+
+
+_PALETTE_NAMES = tuple(PALETTE)
+_PALETTE_CHROMA = np.array([np.array(rgb, dtype=float) / max(rgb) for rgb in PALETTE.values()])
+
+
+def deproject(view: CameraView) -> tuple[np.ndarray, np.ndarray]:
+    """World points (H, W, 3) of every pixel and the mask of pixels with a valid depth."""
+    height, width = view.depth.shape
+    k = view.camera_matrix
+    u, v = np.meshgrid(np.arange(width, dtype=np.float32), np.arange(height, dtype=np.float32))
+    z = np.nan_to_num(view.depth.astype(np.float32), nan=0.0)
+    valid = z > 0
+    optical = np.stack([(u - k[0, 2]) * z / k[0, 0], (v - k[1, 2]) * z / k[1, 1], z], axis=-1)
+    rotation, translation = view.world_from_optical[:3, :3], view.world_from_optical[:3, 3]
+    return optical @ rotation.T.astype(np.float32) + translation.astype(np.float32), valid
+
+
+def label_colors(pixels: np.ndarray, config: DetectorConfig) -> np.ndarray:
+    """Index into PALETTE for each RGB pixel (shape (N, 3)), -1 where no palette colour fits."""
+    pixels = pixels.astype(np.float32)
+    brightest = pixels.max(axis=-1, keepdims=True)
+    chroma = pixels / np.maximum(brightest, 1.0)
+    distances = np.linalg.norm(chroma[:, None, :] - _PALETTE_CHROMA[None], axis=-1)
+    labels = distances.argmin(axis=-1)
+    usable = (distances.min(axis=-1) <= config.max_color_distance) & (brightest[:, 0] >= config.min_brightness)
+    return np.where(usable, labels, -1)
+
+
+def detect(view: CameraView, config: DetectorConfig = DetectorConfig()) -> list[PerceivedObject]:
+    """Every block and bowl seen in the view, in the world frame, sorted by name."""
+    points, valid = deproject(view)
+    x, y, z = points[..., 0], points[..., 1], points[..., 2]
+    on_table = (valid & (z > config.min_height) & (z < config.max_height)
+                & (x > config.table_x[0]) & (x < config.table_x[1])
+                & (y > config.table_y[0]) & (y < config.table_y[1]))
+    # Colour only the pixels standing on the table: a few percent of the image.
+    labels = np.full(on_table.shape, -1, dtype=np.int64)
+    labels[on_table] = label_colors(view.rgb[on_table], config)
+    found: list[PerceivedObject] = []
+    for index, color in enumerate(_PALETTE_NAMES):
+        mask = (labels == index).astype(np.uint8)
+        if mask.sum() < config.min_pixels:
+            continue
+        # Opening removes single stray pixels (edges blending two colours) before grouping.
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+        for cluster in _objects_of_one_color(mask, points, config):
+            found.extend(_classify(color, cluster, config))
+    return sorted(found, key=lambda obj: obj.name)
+
+
+def _objects_of_one_color(mask: np.ndarray, points: np.ndarray, config: DetectorConfig) -> list[np.ndarray]:
+    """World points per object: connected regions, joined when they lie close together in the world."""
+    count, regions, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    groups: list[np.ndarray] = []
+    for region in range(1, count):
+        if stats[region, cv2.CC_STAT_AREA] < config.min_pixels:
+            continue
+        cloud = points[regions == region]
+        for i, group in enumerate(groups):
+            if _xy_gap(group, cloud) < config.join_distance:
+                groups[i] = np.vstack([group, cloud])
+                break
+        else:
+            groups.append(cloud)
+    return groups
+
+
+def _xy_gap(a: np.ndarray, b: np.ndarray) -> float:
+    """Distance between the xy bounding boxes of two clouds (0 when they overlap)."""
+    low = np.maximum(a[:, :2].min(axis=0), b[:, :2].min(axis=0))
+    high = np.minimum(a[:, :2].max(axis=0), b[:, :2].max(axis=0))
+    return float(np.linalg.norm(np.maximum(low - high, 0.0)))
+
+
+def _classify(color: str, cloud: np.ndarray, config: DetectorConfig) -> list[PerceivedObject]:
+    extent = float(np.max(np.ptp(cloud[:, :2], axis=0)))
+    if extent < 0.5 * (config.block_size * np.sqrt(2) + config.bowl_diameter):
+        return [_block(color, cloud, config)]
+    bowl = _bowl(color, cloud, config)
+    # A same-coloured block inside the bowl stands above the bowl's floor, near its centre.
+    centre = np.array(bowl.position[:2])
+    near_centre = np.linalg.norm(cloud[:, :2] - centre, axis=1) < 0.5 * config.bowl_diameter - 0.01
+    floor = np.percentile(cloud[near_centre, 2], 10) if near_centre.any() else 0.0
+    raised = cloud[near_centre & (cloud[:, 2] > floor + 0.5 * config.block_size)]
+    if len(raised) >= config.min_pixels:
+        return [bowl, _block(color, raised, config)]
+    return [bowl]
+
+
+def _block(color: str, cloud: np.ndarray, config: DetectorConfig) -> PerceivedObject:
+    # The top face is the best-seen part of a cube from above: its centre is the cube's xy, its height the top.
+    top = float(np.percentile(cloud[:, 2], 95))
+    face = cloud[cloud[:, 2] > top - 0.006]
+    centre_xy = (face[:, :2].min(axis=0) + face[:, :2].max(axis=0)) / 2
+    half = config.block_size / 2
+    return PerceivedObject.from_fields(color, 'block', (centre_xy[0], centre_xy[1], top - half),
+                                       (config.block_size,) * 3)
+
+
+def _bowl(color: str, cloud: np.ndarray, config: DetectorConfig) -> PerceivedObject:
+    low, high = cloud[:, :2].min(axis=0), cloud[:, :2].max(axis=0)
+    centre_xy = (low + high) / 2
+    height = float(np.percentile(cloud[:, 2], 98))
+    return PerceivedObject.from_fields(color, 'bowl', (centre_xy[0], centre_xy[1], height / 2),
+                                       (high[0] - low[0], high[1] - low[1], height))
