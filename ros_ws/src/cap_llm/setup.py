@@ -8,13 +8,15 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    # Prompts, reference cassettes and the guard helpers' source are read at run time from the package folder.
+    package_data={package_name: ['prompts/*.txt', 'cassettes/*.yaml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
     ],
     install_requires=['setuptools'],
-    zip_safe=True,
+    zip_safe=False,
     maintainer='cap-ros maintainers',
     maintainer_email='maintainers@cap-ros.dev',
     description='Language model programs: prompts, hierarchical code generation, sandboxed execution, LLM clients, lmp_node.',

@@ -1,0 +1,55 @@
+"""Exceptions of the LMP engine. Every message is written for the person who sent the command."""
+from __future__ import annotations
+
+
+class CapLLMError(Exception):
+    """Base of every error the engine reports."""
+
+
+class SandboxError(CapLLMError):
+    """Generated code was refused or stopped by the sandbox: its message says what and why."""
+
+
+class CodeRejected(SandboxError):
+    """The code failed the checks before it ran (syntax, imports, dunder access, forbidden names...)."""
+
+    def __init__(self, message: str, line: int | None = None, source_line: str | None = None) -> None:
+        super().__init__(message)
+        self.line = line
+        self.source_line = source_line
+
+
+class ExecutionStopped(SandboxError):
+    """The running program was stopped: time limit, cancellation, memory or recursion limit.
+
+    `reason` is one of 'timeout', 'cancelled', 'memory', 'recursion'.
+    """
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
+class ResourceLimitError(SandboxError):
+    """An operation would have built a value larger than the sandbox allows (raised before the work is done)."""
+
+
+class OperationRefused(SandboxError):
+    """An operation the sandbox does not allow at run time (e.g. a format field that looks up an attribute)."""
+
+
+class GenerationError(CapLLMError):
+    """Code generation failed: the model defined the wrong function, a depth or cycle limit was hit, ..."""
+
+
+class LLMError(CapLLMError):
+    """The language model endpoint could not give an answer (HTTP errors after retries, bad responses)."""
+
+
+class CassetteMissError(LLMError):
+    """A replay cassette has no entry for the LMP and query that were asked."""
+
+    def __init__(self, lmp: str, query: str, path: str) -> None:
+        super().__init__(f'the cassette {path} has no answer for LMP {lmp!r} and query {query!r}')
+        self.lmp = lmp
+        self.query = query
