@@ -24,6 +24,8 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'lmp_node = cap_llm.lmp_node:main',
+            'cap = cap_llm.cli:main',
         ],
     },
 )

@@ -1,0 +1,83 @@
+"""The rule for commands that arrive while another runs: one runs at a time, later ones wait in a bounded FIFO.
+
+Plain Python (no rclpy) so the rule is tested on its own. A command that finds the queue full is refused at once;
+a stop empties the queue as well as ending the running command.
+"""
+from __future__ import annotations
+
+import collections
+import itertools
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass
+class Job:
+    command_id: str
+    command: str
+    source: str  # 'topic' or 'action'
+    finished: threading.Event = field(default_factory=threading.Event)
+    cancel_requested: bool = False
+    result: Any = None  # the engine's CommandResult, or None when dropped before running
+    outcome: str = ''  # 'done', 'error', 'cancelled', 'refused'
+
+
+class CommandQueue:
+    def __init__(self, max_waiting: int = 5) -> None:
+        self.max_waiting = max_waiting
+        self._waiting: collections.deque[Job] = collections.deque()
+        self._condition = threading.Condition()
+        self._ids = itertools.count(1)
+        self.running: Job | None = None
+        self._closed = False
+
+    def submit(self, command: str, source: str) -> tuple[Job, bool]:
+        """A new job and whether it was queued (False: refused, the queue is full)."""
+        with self._condition:
+            job = Job(command_id=f'cmd-{next(self._ids)}', command=command, source=source)
+            if len(self._waiting) >= self.max_waiting or self._closed:
+                return job, False
+            self._waiting.append(job)
+            self._condition.notify()
+            return job, True
+
+    def next_job(self, timeout: float | None = None) -> Job | None:
+        """Block until a job is waiting (or the queue is closed); mark it running."""
+        with self._condition:
+            if not self._condition.wait_for(lambda: self._waiting or self._closed, timeout):
+                return None
+            if self._closed:
+                return None
+            self.running = self._waiting.popleft()
+            return self.running
+
+    def finish(self, job: Job) -> None:
+        with self._condition:
+            if self.running is job:
+                self.running = None
+        job.finished.set()
+
+    def withdraw(self, job: Job) -> bool:
+        """Remove a job that has not started; False when it already runs or ran."""
+        with self._condition:
+            if job in self._waiting:
+                self._waiting.remove(job)
+                return True
+            return False
+
+    def drain(self) -> list[Job]:
+        """Remove and return every waiting job."""
+        with self._condition:
+            jobs = list(self._waiting)
+            self._waiting.clear()
+            return jobs
+
+    def waiting(self) -> int:
+        with self._condition:
+            return len(self._waiting)
+
+    def close(self) -> None:
+        with self._condition:
+            self._closed = True
+            self._condition.notify_all()

@@ -1,0 +1,178 @@
+"""lmp_node over DDS with the real perception node (stub source) and a replay cassette: statuses, code, say,
+errors a person understands, refusal of unsafe code, cancel, /cap/stop and sessions."""
+import threading
+import time
+
+import pytest
+import yaml
+from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_msgs.msg import Empty, String
+from std_srvs.srv import Trigger
+
+from cap_interfaces.action import ExecuteCommand
+from cap_interfaces.msg import GraphNames, StatusEvent
+from cap_llm.lmp_node import COMMAND_QOS, EVENT_QOS, LmpNode
+from cap_perception.perception_node import PerceptionNode
+
+PROGRAMS = {
+    'which blocks are there': "say('I see ' + ', '.join(n for n in get_obj_names() if n.endswith('block')))",
+    'where is the purple block': "say(str(get_obj_pos('purple block')))",
+    'delete your files': "import os\nos.system('rm -rf /tmp/cap-test-victim')",
+    'count forever': 'n = 0\nwhile True:\n    n += 1',
+    'remember the red block': "chosen = 'red block'",
+    'say what you remembered': 'say(chosen)',
+}
+
+
+def _write_cassette(path):
+    entries = [{'lmp': 'tabletop_ui', 'query': query, 'context': '*', 'completion': code,
+                'source': 'written by hand as a reference program'} for query, code in PROGRAMS.items()]
+    path.write_text(yaml.safe_dump({'format': 'cap-llm-cassette/1', 'entries': entries}))
+
+
+def wait_for(predicate, timeout=15.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.01)
+    return predicate()
+
+
+class Graph:
+    """lmp_node + perception_node (stub objects) + a user node, spun by an executor in a background thread."""
+
+    def __init__(self, context, tmp_path):
+        stub = tmp_path / 'objects.yaml'
+        stub.write_text('objects:\n'
+                        '  - {color: red, category: block, position: [0.1, -0.5, 0.02]}\n'
+                        '  - {color: blue, category: block, position: [-0.1, -0.6, 0.02]}\n'
+                        '  - {color: green, category: bowl, position: [0.0, -0.4, 0.03], size: [0.13, 0.13, 0.04]}\n')
+        cassette = tmp_path / 'cassette.yaml'
+        _write_cassette(cassette)
+        self.perception = PerceptionNode(context=context, parameter_overrides=[
+            Parameter('source', value='stub'), Parameter('stub_file', value=str(stub))])
+        self.lmp = LmpNode(context=context, parameter_overrides=[
+            Parameter('cassette', value=str(cassette)), Parameter('time_limit_s', value=20.0)])
+        self.user = Node('user', context=context)
+        self.statuses, self.said, self.code = [], [], []
+        self.user.create_subscription(StatusEvent, GraphNames.STATUS_TOPIC, self.statuses.append, EVENT_QOS)
+        self.user.create_subscription(String, GraphNames.SAY_TOPIC, lambda m: self.said.append(m.data), EVENT_QOS)
+        self.user.create_subscription(String, GraphNames.CODE_TOPIC, lambda m: self.code.append(m.data), EVENT_QOS)
+        self.commands = self.user.create_publisher(String, GraphNames.COMMAND_TOPIC, COMMAND_QOS)
+        self.stop = self.user.create_publisher(Empty, GraphNames.STOP_TOPIC, COMMAND_QOS)
+        self.execute = ActionClient(self.user, ExecuteCommand, GraphNames.EXECUTE_ACTION)
+        self.reset = self.user.create_client(Trigger, GraphNames.RESET_SESSION_SERVICE)
+        self.executor = MultiThreadedExecutor(num_threads=6, context=context)
+        for node in (self.perception, self.lmp, self.user):
+            self.executor.add_node(node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+        assert wait_for(lambda: self.commands.get_subscription_count() == 1 and self.execute.server_is_ready())
+
+    def stages(self, command_id):
+        return [s.stage for s in list(self.statuses) if s.command_id == command_id]
+
+    def final(self, command_id):
+        for status in reversed(list(self.statuses)):
+            if status.command_id == command_id and status.stage >= StatusEvent.STAGE_DONE:
+                return status
+        return None
+
+    def run(self, command, timeout=20.0):
+        """Send through /cap/execute; return the wrapped result (status, result)."""
+        done = threading.Event()
+        box = {}
+
+        def on_goal(future):
+            box['handle'] = future.result()
+            box['handle'].get_result_async().add_done_callback(lambda f: (box.update(result=f.result()),
+                                                                           done.set()))
+        self.execute.send_goal_async(ExecuteCommand.Goal(command=command)).add_done_callback(on_goal)
+        assert done.wait(timeout), f'no result for {command!r}'
+        return box['result']
+
+    def close(self):
+        self.executor.shutdown()
+        self.thread.join(5)
+        for node in (self.perception, self.lmp, self.user):
+            node.destroy_node()
+
+
+@pytest.fixture
+def graph(ros_context, tmp_path):
+    graph = Graph(ros_context, tmp_path)
+    yield graph
+    graph.close()
+
+
+def test_a_topic_command_runs_and_reports_every_stage(graph):
+    graph.commands.publish(String(data='which blocks are there'))
+    assert wait_for(lambda: graph.said)
+    assert graph.said == ['I see red block, blue block'] or graph.said == ['I see blue block, red block']
+    command_id = graph.statuses[0].command_id
+    assert wait_for(lambda: graph.final(command_id) is not None)
+    assert graph.stages(command_id) == [StatusEvent.STAGE_RECEIVED, StatusEvent.STAGE_GENERATING,
+                                        StatusEvent.STAGE_CODE, StatusEvent.STAGE_EXECUTING, StatusEvent.STAGE_DONE]
+    assert graph.code == [PROGRAMS['which blocks are there']]
+
+
+def test_unknown_object_is_an_error_naming_it_and_the_next_command_works(graph):
+    outcome = graph.run('where is the purple block')
+    assert outcome.status == GoalStatus.STATUS_ABORTED
+    assert not outcome.result.success
+    assert "'purple block'" in outcome.result.message and 'red block' in outcome.result.message
+    assert graph.final(outcome.result.command_id).stage == StatusEvent.STAGE_ERROR
+    again = graph.run('which blocks are there')
+    assert again.result.success and again.status == GoalStatus.STATUS_SUCCEEDED
+
+
+def test_unsafe_code_is_refused_before_it_runs(graph, tmp_path):
+    outcome = graph.run('delete your files')
+    assert not outcome.result.success
+    assert 'import' in outcome.result.message
+    assert graph.final(outcome.result.command_id).stage == StatusEvent.STAGE_REFUSED
+    assert graph.run('which blocks are there').result.success
+
+
+def test_a_missing_cassette_entry_names_the_query(graph):
+    outcome = graph.run('juggle the bowls')
+    assert not outcome.result.success
+    assert 'juggle the bowls' in outcome.result.message
+
+
+def test_cancelling_the_goal_stops_an_endless_program(graph):
+    box = {}
+    graph.execute.send_goal_async(ExecuteCommand.Goal(command='count forever')).add_done_callback(
+        lambda f: box.update(handle=f.result()))
+    assert wait_for(lambda: 'handle' in box and any(s.stage == StatusEvent.STAGE_EXECUTING
+                                                    for s in list(graph.statuses)))
+    result_future = box['handle'].get_result_async()
+    box['handle'].cancel_goal_async()
+    assert wait_for(result_future.done)
+    assert result_future.result().status == GoalStatus.STATUS_CANCELED
+    assert graph.run('which blocks are there').result.success
+
+
+def test_cap_stop_ends_the_running_program_and_drops_waiting_ones(graph):
+    graph.commands.publish(String(data='count forever'))
+    graph.commands.publish(String(data='which blocks are there'))
+    assert wait_for(lambda: any(s.stage == StatusEvent.STAGE_EXECUTING for s in list(graph.statuses)))
+    graph.stop.publish(Empty())
+    assert wait_for(lambda: sum(s.stage == StatusEvent.STAGE_CANCELLED for s in list(graph.statuses)) == 2)
+    assert graph.said == []
+    assert graph.run('which blocks are there').result.success
+
+
+def test_the_session_remembers_until_it_is_reset(graph):
+    assert graph.run('remember the red block').result.success
+    assert graph.run('say what you remembered').result.success
+    assert graph.said[-1] == 'red block'
+    future = graph.reset.call_async(Trigger.Request())
+    assert wait_for(future.done) and future.result().success
+    forgotten = graph.run('say what you remembered')
+    assert not forgotten.result.success and 'chosen' in forgotten.result.message
