@@ -1,8 +1,10 @@
 """`cap`: the command line of cap-ros (works without ros2cli).
 
+    cap up --seed 3                                  bring up the whole simulated graph (Ctrl-C stops it)
     cap send "put the red block in the blue bowl"   run a command, follow it to the end (exit 0 only on success)
     cap stop                                         stop the running program and every motion
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
+    cap demo                                         the table-top demo (see cap_llm/demo.py)
 
 Uses the ROS_DOMAIN_ID of the environment; discovery stays on this host unless ROS_AUTOMATIC_DISCOVERY_RANGE says
 otherwise.
@@ -13,6 +15,7 @@ import argparse
 import os
 import pathlib
 import sys
+import threading
 import time
 from typing import Callable, Sequence
 
@@ -161,9 +164,53 @@ def snapshot(cameras: Sequence[str], out_dir: pathlib.Path, server_timeout: floa
         session.close()
 
 
+def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, cassette: str,
+       record: bool) -> int:
+    """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C."""
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    import rclpy
+    from rclpy.context import Context
+
+    from cap_llm.graph import Graph, GraphOptions
+
+    import signal
+
+    from rclpy.signals import SignalHandlerOptions
+
+    context = Context()
+    # Our own handlers: Ctrl-C (SIGINT) and SIGTERM both end the graph cleanly, whatever started this process.
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    stop_requested = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop_requested.set())
+    graph = None
+    try:
+        graph = Graph(context, GraphOptions(seed=seed, objects=objects, real_time=real_time, perception=perception,
+                                            llm_backend=backend, cassette=cassette, record_cassette=record))
+        print(f'cap-ros is up (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}): '
+              f'{", ".join(graph.nodes)}. Send commands with: cap send "..."  Stop with Ctrl-C.', flush=True)
+        stop_requested.wait()
+        print('shutting down', flush=True)
+        return EXIT_OK
+    finally:
+        if graph is not None:
+            graph.close()
+        context.try_shutdown()
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='cap', description='Command a cap-ros robot in plain language.')
     commands = parser.add_subparsers(dest='command', required=True)
+    p_up = commands.add_parser('up', help='bring up the simulated table-top graph (sim, perception, control, lmp)')
+    p_up.add_argument('--seed', type=int, default=0, help='scene seed [0]')
+    p_up.add_argument('--objects', default='', help='comma-separated objects, e.g. "red block, blue bowl"')
+    p_up.add_argument('--real-time', action='store_true', help='simulate in real time (default: as fast as possible)')
+    p_up.add_argument('--perception', choices=('ground_truth', 'rgbd'), default='ground_truth')
+    p_up.add_argument('--backend', choices=('cassette', 'http'), default='cassette',
+                      help='cassette (offline replay) or http (CAP_LLM_BASE_URL, CAP_LLM_MODEL, CAP_LLM_API_KEY)')
+    p_up.add_argument('--cassette', default='', help='cassette file (default: the packaged reference cassette)')
+    p_up.add_argument('--record', action='store_true', help='with --backend http: record answers into --cassette')
+    commands.add_parser('demo', help='run the table-top demo (options: cap demo -- --help)', add_help=False)
     p_send = commands.add_parser('send', help='run a natural-language command and follow it to the end')
     p_send.add_argument('text', help='the command, e.g. "put the red block in the blue bowl"')
     p_send.add_argument('--timeout', type=float, default=600.0, help='give up after this many seconds [600]')
@@ -178,7 +225,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ['demo']:
+        from cap_llm import demo
+        return demo.main([a for a in argv[1:] if a != '--'])
     args = build_parser().parse_args(argv)
+    if args.command == 'up':
+        return up(args.seed, args.objects, args.real_time, args.perception, args.backend, args.cassette, args.record)
     if args.command == 'send':
         return send(args.text, args.wait, args.timeout)
     if args.command == 'stop':

@@ -19,7 +19,9 @@ class Job:
     source: str  # 'topic' or 'action'
     finished: threading.Event = field(default_factory=threading.Event)
     cancel_requested: bool = False
+    stop_reason: str = ''  # why it was cancelled, in words
     result: Any = None  # the engine's CommandResult, or None when dropped before running
+    goal_handle: Any = None  # the /cap/execute goal waiting for this job, if it came as one
     outcome: str = ''  # 'done', 'error', 'cancelled', 'refused'
 
 
@@ -32,10 +34,10 @@ class CommandQueue:
         self.running: Job | None = None
         self._closed = False
 
-    def submit(self, command: str, source: str) -> tuple[Job, bool]:
+    def submit(self, command: str, source: str, goal_handle: Any = None) -> tuple[Job, bool]:
         """A new job and whether it was queued (False: refused, the queue is full)."""
         with self._condition:
-            job = Job(command_id=f'cmd-{next(self._ids)}', command=command, source=source)
+            job = Job(command_id=f'cmd-{next(self._ids)}', command=command, source=source, goal_handle=goal_handle)
             if len(self._waiting) >= self.max_waiting or self._closed:
                 return job, False
             self._waiting.append(job)

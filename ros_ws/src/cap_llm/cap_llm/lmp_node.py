@@ -47,8 +47,9 @@ class LmpNode(Node):
         backend = self._parameter('llm_backend', 'cassette', 'cassette (replay a recorded cassette, offline) or '
                                   'http (an OpenAI-compatible endpoint; CAP_LLM_BASE_URL, CAP_LLM_MODEL, '
                                   'CAP_LLM_API_KEY from the environment unless set below).')
-        cassette = self._parameter('cassette', str(DEFAULT_CASSETTE), 'Cassette file for llm_backend=cassette, '
-                                   'or the file to record into with record_cassette=true.')
+        cassette = self._parameter('cassette', '', 'Cassette file for llm_backend=cassette, or the file to record '
+                                   'into with record_cassette=true; empty: the packaged reference cassette.')
+        cassette = cassette or str(DEFAULT_CASSETTE)
         record = self._parameter('record_cassette', False, 'With llm_backend=http: also record every answer '
                                  'into `cassette`.')
         base_url = self._parameter('base_url', '', 'OpenAI-compatible endpoint; empty: CAP_LLM_BASE_URL.')
@@ -84,7 +85,6 @@ class LmpNode(Node):
         self.engine = build_tabletop_engine(self.robot.functions(), client, SandboxLimits(time_limit_s=time_limit))
         self.engine.add_listener(self._on_engine_event)
         self.queue = CommandQueue(max_queued)
-        self._job_feedback: dict[str, Any] = {}  # command_id -> goal handle awaiting feedback
         self._current: Job | None = None
 
         # Commands, stop and reset are handled apart from the action server so that a stop is never stuck behind
@@ -109,8 +109,8 @@ class LmpNode(Node):
     def _on_command(self, msg: String) -> None:
         self.submit(msg.data, 'topic')
 
-    def submit(self, command: str, source: str) -> tuple[Job, bool]:
-        job, queued = self.queue.submit(command, source)
+    def submit(self, command: str, source: str, goal_handle: Any = None) -> tuple[Job, bool]:
+        job, queued = self.queue.submit(command, source, goal_handle)
         if queued:
             self._publish_status(job, StatusEvent.STAGE_RECEIVED, message=f'queued behind {self.queue.waiting() - 1}'
                                  if self.queue.waiting() > 1 else '')
@@ -127,12 +127,12 @@ class LmpNode(Node):
         return GoalResponse.REJECT if self.queue.waiting() >= self.queue.max_waiting else GoalResponse.ACCEPT
 
     def _execute_goal(self, goal_handle):
-        job, queued = self.submit(goal_handle.request.command, 'action')
-        self._job_feedback[job.command_id] = goal_handle
+        job, queued = self.submit(goal_handle.request.command, 'action', goal_handle)
         try:
             while not job.finished.wait(0.02):
                 if goal_handle.is_cancel_requested and not job.cancel_requested:
                     job.cancel_requested = True
+                    job.stop_reason = 'cancelled by the client of /cap/execute'
                     if self.queue.withdraw(job):
                         job.outcome = 'cancelled'
                         self._publish_status(job, StatusEvent.STAGE_CANCELLED, message='cancelled before it ran')
@@ -140,7 +140,7 @@ class LmpNode(Node):
                     elif self._current is job:
                         self._stop_running()
         finally:
-            self._job_feedback.pop(job.command_id, None)
+            job.goal_handle = None
         result = ExecuteCommand.Result(command_id=job.command_id)
         if job.result is not None:
             result.success = bool(job.result.success)
@@ -186,6 +186,8 @@ class LmpNode(Node):
             stage, outcome = StatusEvent.STAGE_REFUSED, 'refused'
         elif result.stop_reason == 'cancelled' or result.error_type == 'StoppedError' or job.cancel_requested:
             stage, outcome = StatusEvent.STAGE_CANCELLED, 'cancelled'
+            if job.stop_reason:
+                result.message = f'{job.stop_reason} ({result.message})'
         else:
             stage, outcome = StatusEvent.STAGE_ERROR, 'error'
         self._publish_status(job, stage, code=result.code, message=result.message or outcome)
@@ -209,7 +211,7 @@ class LmpNode(Node):
                              message=message)
         status.header.stamp = self.get_clock().now().to_msg()
         self._status_publisher.publish(status)
-        goal_handle = self._job_feedback.get(job.command_id)
+        goal_handle = job.goal_handle
         if goal_handle is not None:
             goal_handle.publish_feedback(ExecuteCommand.Feedback(status=status))
 
@@ -224,8 +226,10 @@ class LmpNode(Node):
             job.outcome = 'cancelled'
             self._publish_status(job, StatusEvent.STAGE_CANCELLED, message=reason)
             job.finished.set()
-        if self._current is not None:
-            self._current.cancel_requested = True
+        current = self._current
+        if current is not None:
+            current.cancel_requested = True
+            current.stop_reason = reason
             self._stop_running()
         self.get_logger().info(reason)
 
