@@ -22,6 +22,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'pick_place = cap_control.pick_place_node:main',
         ],
     },
 )

@@ -1,0 +1,79 @@
+"""Benchmark of the UR5e kinematics of cap_control: IK solve time, IK accuracy over the table, reach margins.
+
+Prints one JSON object. Run: source scripts/env.sh && python benchmarks/kinematics.py
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+
+import numpy as np
+
+from cap_control.kinematics import (
+    HOME_JOINTS, forward_kinematics, inverse_kinematics, pose_error, top_down_pose, top_down_reach_margin,
+)
+from cap_control.pick_place import ObjectInfo, plan_pick_place
+
+POSES = 1000
+TABLE_X, TABLE_Y = (-0.3, 0.3), (-0.8, -0.2)
+BLOCK_CENTRE_HEIGHT = 0.02
+NAMED_POSITIONS = {
+    'top left corner': (-0.25, -0.25), 'top side': (0.0, -0.25), 'top right corner': (0.25, -0.25),
+    'left side': (-0.25, -0.5), 'middle': (0.0, -0.5), 'right side': (0.25, -0.5),
+    'bottom left corner': (-0.25, -0.75), 'bottom side': (0.0, -0.75), 'bottom right corner': (0.25, -0.75),
+}
+
+
+def percentile_us(samples: list[float], q: float) -> float:
+    return round(float(np.percentile(samples, q)) * 1e6, 1)
+
+
+def main() -> None:
+    rng = np.random.default_rng(0)
+    poses = [top_down_pose((rng.uniform(*TABLE_X), rng.uniform(*TABLE_Y), rng.uniform(0.02, 0.3)),
+                           rng.uniform(-math.pi, math.pi)) for _ in range(POSES)]
+    for pose in poses[:100]:  # warm-up: first calls pay for imports and caches
+        inverse_kinematics(pose)
+    solve_times, position_errors, angle_errors = [], [], []
+    for pose in poses:
+        start = time.perf_counter()
+        q = inverse_kinematics(pose)
+        solve_times.append(time.perf_counter() - start)
+        position_error, angle_error = pose_error(pose, forward_kinematics(q))
+        position_errors.append(position_error)
+        angle_errors.append(angle_error)
+
+    grid = [(x, y) for x in np.linspace(*TABLE_X, 61) for y in np.linspace(*TABLE_Y, 61)]
+    margins = [top_down_reach_margin((x, y, BLOCK_CENTRE_HEIGHT)) for x, y in grid]
+    tightest = grid[int(np.argmin(margins))]
+
+    plan_times = []
+    for _ in range(20):
+        obj = ObjectInfo('block', (rng.uniform(-0.2, 0.2), rng.uniform(-0.7, -0.3), 0.02), (0.04, 0.04, 0.04),
+                         yaw=rng.uniform(-math.pi, math.pi))
+        start = time.perf_counter()
+        plan = plan_pick_place(obj, (rng.uniform(-0.25, 0.25), rng.uniform(-0.75, -0.25)), HOME_JOINTS)
+        plan_times.append(time.perf_counter() - start)
+
+    print(json.dumps({
+        'ik_poses': POSES,
+        'ik_solve_us_p50': percentile_us(solve_times, 50),
+        'ik_solve_us_p99': percentile_us(solve_times, 99),
+        'ik_max_position_error_m': float(max(position_errors)),
+        'ik_max_angle_error_deg': math.degrees(max(angle_errors)),
+        'ik_poses_within_1mm_0.5deg': int(sum(p <= 1e-3 and math.degrees(a) <= 0.5
+                                              for p, a in zip(position_errors, angle_errors))),
+        'table_reach_margin_min_m': round(min(margins), 4),
+        'table_reach_margin_min_at_xy': [round(v, 3) for v in tightest],
+        'table_far_corner_distance_m': round(math.hypot(0.3, 0.8), 4),
+        'named_position_reach_margin_m': {name: round(top_down_reach_margin((x, y, BLOCK_CENTRE_HEIGHT)), 4)
+                                          for name, (x, y) in NAMED_POSITIONS.items()},
+        'pick_place_plan_ms_p50': round(float(np.percentile(plan_times, 50)) * 1e3, 1),
+        'pick_place_plan_ms_p99': round(float(np.percentile(plan_times, 99)) * 1e3, 1),
+        'pick_place_planned_motion_s_last': round(plan.duration, 2),
+    }, indent=2))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,523 @@
+"""Pick-and-place as a plan of stages: which motions, gripper commands and checks move an object onto a target.
+
+The plan is pure data computed before anything moves, so that an unreachable pose or a target outside the
+workspace is reported before the arm starts. An executor (the ROS node) runs the stages in order:
+
+    for stage in plan.stages:                      # feedback: stage.name; cancel is honoured between stages
+        for step in stage.steps:
+            TrajectoryStep -> plan.trajectory_for(step, actual_joints) as a FollowJointTrajectory goal; cancel
+                              the goal when the action is cancelled. With step.stop_on_contact, a tracking error
+                              above step.contact_tolerance (or PATH_TOLERANCE_VIOLATED) means "touched down": the
+                              step ends there successfully.
+            GripperStep    -> a GripperCommand goal; its result feeds the checks.
+        for check in stage.checks: failure = check.failure(observation); on failure stop with stage.failure_code.
+
+Stages (names as in PickPlace.action feedback): approach above the object with the gripper open, descend, close
+(grasp), verify the grasp (finger gap and the fingers stalling on the object), lift (the fingers still apart),
+move above the target, place (descend until contact or the target's height: onto a block's top, into a bowl down
+to its floor, onto the table), release, retreat (and see the object near the target).
+
+Workspace limits are enforced here whatever the caller asks: an object or target outside the table bounds is
+refused with OUTSIDE_WORKSPACE, and no TCP pose goes below the table's safety height.
+"""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+from typing import Sequence, Union
+
+import numpy as np
+
+from cap_control.kinematics import (
+    DEFAULT_TOOL_OFFSET, IKError, forward_kinematics, inverse_kinematics, joint_distance, top_down_pose,
+)
+from cap_control.trajectory import (
+    UR5E_LIMITS, CartesianLimits, JointLimits, JointTrajectory, TrajectoryError, cartesian_line, time_joint_path,
+    trajectory_tcp_positions,
+)
+
+
+class PickPlaceErrorCode(enum.IntEnum):
+    """Result codes; the values are those of cap_interfaces/action/PickPlace.action."""
+
+    NONE = 0
+    UNKNOWN = 1
+    OBJECT_NOT_FOUND = 2
+    TARGET_NOT_FOUND = 3
+    OUTSIDE_WORKSPACE = 4
+    IK_FAILED = 5
+    GRASP_MISSED = 6
+    OBJECT_DROPPED = 7
+    CANCELLED = 8
+    TIMEOUT = 9
+
+
+class StageName(str, enum.Enum):
+    """Stage names; the values are the STAGE_* feedback constants of PickPlace.action."""
+
+    APPROACH = 'approach'
+    DESCEND = 'descend'
+    GRASP = 'grasp'
+    VERIFY = 'verify'
+    LIFT = 'lift'
+    MOVE = 'move'
+    PLACE = 'place'
+    RELEASE = 'release'
+    RETREAT = 'retreat'
+
+
+class PickPlaceError(Exception):
+    """A pick-and-place that cannot be done, with the result code to report."""
+
+    def __init__(self, code: PickPlaceErrorCode, message: str):
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+
+CATEGORY_BLOCK = 'block'
+CATEGORY_BOWL = 'bowl'
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """Where the arm may pick and place: the table-top rectangle [m, world frame] and its surface height."""
+
+    x_min: float = -0.3
+    x_max: float = 0.3
+    y_min: float = -0.8
+    y_max: float = -0.2
+    table_z: float = 0.0
+    # Lowest TCP height above the table: the finger pads reach 12.5 mm below the TCP.
+    min_tcp_height: float = 0.016
+
+    def contains_xy(self, x: float, y: float) -> bool:
+        return self.x_min <= x <= self.x_max and self.y_min <= y <= self.y_max
+
+    def describe(self) -> str:
+        return f'x in [{self.x_min:g}, {self.x_max:g}], y in [{self.y_min:g}, {self.y_max:g}]'
+
+
+@dataclass(frozen=True)
+class ObjectInfo:
+    """An object on the table: centre of its bounding box, its own extents (along its yaw, across it, height)."""
+
+    name: str
+    position: tuple[float, float, float]
+    size: tuple[float, float, float]
+    category: str = CATEGORY_BLOCK
+    yaw: float = 0.0
+
+    @property
+    def bottom(self) -> float:
+        return self.position[2] - self.size[2] / 2
+
+    @property
+    def top(self) -> float:
+        return self.position[2] + self.size[2] / 2
+
+    @classmethod
+    def from_bounding_box(cls, name: str, bbox_min: Sequence[float], bbox_max: Sequence[float],
+                          category: str = CATEGORY_BLOCK, yaw: float = 0.0) -> 'ObjectInfo':
+        """From a world-axis-aligned bounding box (what perception reports) and the object's yaw about z.
+
+        A box turned by yaw has a wider axis-aligned box; its own extents a (along yaw) and b solve
+        X = a|cos| + b|sin|, Y = a|sin| + b|cos|. Near 45 degrees that system is ill-conditioned, and the object
+        is taken as square.
+        """
+        low, high = np.asarray(bbox_min, dtype=float), np.asarray(bbox_max, dtype=float)
+        extent = high - low
+        c, s = abs(math.cos(yaw)), abs(math.sin(yaw))
+        determinant = c * c - s * s
+        if abs(determinant) < 0.3:
+            side = (extent[0] + extent[1]) / (2 * (c + s))
+            along, across = side, side
+        else:
+            along = (extent[0] * c - extent[1] * s) / determinant
+            across = (extent[1] * c - extent[0] * s) / determinant
+        centre = (low + high) / 2
+        return cls(name, (float(centre[0]), float(centre[1]), float(centre[2])),
+                   (float(along), float(across), float(extent[2])), category, float(yaw))
+
+
+def yaw_of_quaternion(x: float, y: float, z: float, w: float) -> float:
+    """Yaw [rad] of a box's faces about world z, whichever face it rests on.
+
+    The body axis nearest vertical is the one the box stands on; the yaw is the heading of another body axis,
+    which is exact modulo a quarter turn for a cube (and modulo a half turn for an upright box).
+    """
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    rotation = np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+    vertical = int(np.argmax(np.abs(rotation[2])))
+    heading = 0 if vertical != 0 else 1
+    return math.atan2(rotation[1, heading], rotation[0, heading])
+
+
+@dataclass(frozen=True)
+class PickPlaceConfig:
+    """Heights, gripper settings, checks and motion limits of pick-and-place [m, rad, N, s]."""
+
+    workspace: Workspace = Workspace()
+    tool_offset: float = DEFAULT_TOOL_OFFSET
+    # TCP height while travelling (at least), and the gap kept between the held object and anything below it.
+    travel_height: float = 0.25
+    travel_clearance: float = 0.05
+    # Grasp point: this fraction of the object's height above its bottom.
+    grasp_height_fraction: float = 0.5
+    # Largest opening of the gripper, and the room needed on either side of an object to close around it.
+    gripper_open_width: float = 0.085
+    gripper_side_room: float = 0.01
+    # Opening on release: the object's width plus this on each side (a fully opened gripper could push a bowl's wall).
+    release_side_room: float = 0.01
+    grip_force: float = 20.0
+    # Grasp verified when the fingers stop within this of the object's width, stalled on it if required.
+    grasp_width_tolerance: float = 0.012
+    require_stalled: bool = True
+    # Release height above the expected contact; a bowl's floor is taken this far above its bottom.
+    place_clearance: float = 0.005
+    bowl_floor_thickness: float = 0.01
+    # Tracking error [rad] that the executor reads as contact during a stop-on-contact descent.
+    contact_tolerance: float = 0.002
+    # After retreating, the object must lie this close (xy) to the target; farther, it was dropped on the way.
+    place_tolerance: float = 0.08
+    # Largest sag of a joint-space move below its endpoints' height before a straight line is used instead.
+    allowed_sag: float = 0.03
+    joint_limits: JointLimits = UR5E_LIMITS
+    cartesian_limits: CartesianLimits = CartesianLimits()
+    period: float = 0.01
+    # An actual start farther than this [rad] from a step's planned start makes the step be planned again.
+    replan_tolerance: float = 0.01
+
+
+@dataclass
+class TrajectoryStep:
+    """Follow a joint trajectory. `goal_pose` (4x4) for straight lines, `goal_joints` for joint-space moves."""
+
+    trajectory: JointTrajectory
+    cartesian: bool
+    goal_joints: np.ndarray
+    goal_pose: np.ndarray
+    stop_on_contact: bool = False
+    contact_tolerance: float = 0.0
+
+
+@dataclass
+class GripperStep:
+    """Command the gripper opening [m] with at most `max_effort` [N] (0 = the gripper's default)."""
+
+    position: float
+    max_effort: float = 0.0
+
+
+Step = Union[TrajectoryStep, GripperStep]
+
+
+@dataclass
+class Observation:
+    """What the executor saw after a stage's steps.
+
+    gripper_position/stalled: the last gripper result, or the current finger opening [m] where the executor can
+    read it (e.g. from /joint_states); object_position: from perception, for checks that need it, with
+    object_visible False when perception only remembers where the object was last seen.
+    """
+
+    gripper_position: float | None = None
+    gripper_stalled: bool | None = None
+    object_position: tuple[float, float, float] | None = None
+    object_visible: bool = True
+
+
+@dataclass(frozen=True)
+class GraspCheck:
+    """The fingers closed on the object: the opening is about the object's width (and the fingers stalled)."""
+
+    min_gap: float
+    max_gap: float
+    require_stalled: bool
+    needs_object_position = False
+
+    def failure(self, observation: Observation) -> str | None:
+        gap = observation.gripper_position
+        if gap is None:
+            return 'no gripper result to verify the grasp'
+        if gap < self.min_gap:
+            return f'grasp missed: the fingers closed to {gap * 1000:.1f} mm (the object is about ' \
+                   f'{(self.min_gap + self.max_gap) * 500:.0f} mm wide)'
+        if gap > self.max_gap:
+            return f'grasp missed: the fingers stopped at {gap * 1000:.1f} mm, wider than the object'
+        if self.require_stalled and not observation.gripper_stalled:
+            return 'grasp missed: the fingers did not stop on the object'
+        return None
+
+
+@dataclass(frozen=True)
+class LiftCheck:
+    """The object rose with the gripper: the fingers are still held apart by it after the lift.
+
+    Judged by the fingers alone: a camera sees a held object only in part (the gripper hides it), and detectors
+    place it badly, while fingers that closed past the object's width tell a slip for certain.
+    """
+
+    object_name: str
+    min_gap: float
+    needs_object_position = False
+
+    def failure(self, observation: Observation) -> str | None:
+        if observation.gripper_position is None:
+            return f'cannot tell whether the {self.object_name} was lifted (no finger opening)'
+        if observation.gripper_position < self.min_gap:
+            return f'the {self.object_name} slipped out of the gripper while lifting (the fingers closed to ' \
+                   f'{observation.gripper_position * 1000:.1f} mm)'
+        return None
+
+
+@dataclass(frozen=True)
+class PlacedCheck:
+    """The object ended within `tolerance` [m] (xy) of the target point (judged only where it is seen)."""
+
+    object_name: str
+    target_xy: tuple[float, float]
+    tolerance: float
+    needs_object_position = True
+
+    def failure(self, observation: Observation) -> str | None:
+        if observation.object_position is None:
+            return f'the {self.object_name} was not found after placing'
+        if not observation.object_visible:
+            return None
+        miss = math.dist(observation.object_position[:2], self.target_xy)
+        if miss > self.tolerance:
+            return f'the {self.object_name} ended {miss:.3f} m from the target (allowed {self.tolerance:.3f} m)'
+        return None
+
+
+Check = Union[GraspCheck, LiftCheck, PlacedCheck]
+
+
+@dataclass
+class Stage:
+    """One stage: steps run in order, then checks; `progress` is the fraction of the whole done after it."""
+
+    name: StageName
+    steps: list[Step]
+    checks: list[Check] = field(default_factory=list)
+    failure_code: PickPlaceErrorCode = PickPlaceErrorCode.UNKNOWN
+    progress: float = 0.0
+
+
+@dataclass
+class PickPlacePlan:
+    """The stages of one pick-and-place, and the figures they were planned from."""
+
+    object: ObjectInfo
+    target_xy: tuple[float, float]
+    target_description: str
+    stages: list[Stage]
+    grasp_yaw: float
+    place_yaw: float
+    travel_z: float
+    grasp_z: float
+    place_z: float
+    config: PickPlaceConfig
+
+    @property
+    def duration(self) -> float:
+        """Planned motion time [s] (gripper time excluded)."""
+        return sum(step.trajectory.duration for stage in self.stages for step in stage.steps
+                   if isinstance(step, TrajectoryStep))
+
+    def trajectory_for(self, step: TrajectoryStep, actual_joints: Sequence[float]) -> JointTrajectory:
+        """The step's trajectory from where the arm actually is (planned again if it is not at the step's start).
+
+        After a place that stopped on contact, for instance, the retreat starts lower than planned.
+        """
+        actual = np.asarray(actual_joints, dtype=float)
+        if joint_distance(actual, step.trajectory.start) <= self.config.replan_tolerance:
+            return step.trajectory
+        try:
+            if step.cartesian:
+                return cartesian_line(actual, step.goal_pose, self.config.joint_limits, self.config.cartesian_limits,
+                                      self.config.period, self.config.tool_offset)
+            return time_joint_path([actual, step.goal_joints], self.config.joint_limits, self.config.period)
+        except (IKError, TrajectoryError) as error:
+            raise PickPlaceError(PickPlaceErrorCode.IK_FAILED, f'cannot move on from the actual position: {error}')
+
+
+Target = Union[ObjectInfo, Sequence[float]]
+
+
+class _Planner:
+    """Builds one plan; keeps the joint state the stages chain through."""
+
+    def __init__(self, config: PickPlaceConfig, current_joints: Sequence[float]):
+        self.config = config
+        self.joints = np.asarray(current_joints, dtype=float)
+
+    def solve(self, xyz: Sequence[float], yaw: float, what: str) -> np.ndarray:
+        try:
+            return inverse_kinematics(top_down_pose(xyz, yaw), self.joints, self.config.tool_offset)
+        except IKError as error:
+            raise PickPlaceError(PickPlaceErrorCode.IK_FAILED,
+                                 f'cannot reach {what} at {np.round(xyz, 3).tolist()}: {error}')
+
+    def best_yaw(self, xyz: Sequence[float], yaws: Sequence[float], what: str) -> float:
+        """Of equivalent yaws, the one whose joints are nearest the current ones (least wrist turning)."""
+        costs = []
+        for yaw in yaws:
+            try:
+                q = inverse_kinematics(top_down_pose(xyz, yaw), self.joints, self.config.tool_offset)
+            except IKError:
+                continue
+            costs.append((float(np.sum((q - self.joints) ** 2)), yaw))
+        if not costs:
+            self.solve(xyz, yaws[0], what)  # raises with the reason
+        return min(costs)[1]
+
+    def joint_move(self, xyz: Sequence[float], yaw: float, what: str) -> TrajectoryStep:
+        goal = self.solve(xyz, yaw, what)
+        try:
+            trajectory = time_joint_path([self.joints, goal], self.config.joint_limits, self.config.period)
+        except TrajectoryError as error:
+            raise PickPlaceError(PickPlaceErrorCode.IK_FAILED, f'cannot move to {what}: {error}')
+        self.joints = trajectory.end
+        return TrajectoryStep(trajectory, False, goal, top_down_pose(xyz, yaw))
+
+    def line(self, xyz: Sequence[float], yaw: float, what: str, stop_on_contact: bool = False) -> TrajectoryStep:
+        pose = top_down_pose(xyz, yaw)
+        try:
+            trajectory = cartesian_line(self.joints, pose, self.config.joint_limits, self.config.cartesian_limits,
+                                        self.config.period, self.config.tool_offset)
+        except (IKError, TrajectoryError) as error:
+            raise PickPlaceError(PickPlaceErrorCode.IK_FAILED,
+                                 f'cannot move straight to {what} at {np.round(xyz, 3).tolist()}: {error}')
+        self.joints = trajectory.end
+        return TrajectoryStep(trajectory, True, trajectory.end, pose, stop_on_contact,
+                              self.config.contact_tolerance if stop_on_contact else 0.0)
+
+    def travel(self, xyz: Sequence[float], yaw: float, what: str, lowest_allowed_z: float) -> TrajectoryStep:
+        """A joint-space move at travel height, or a straight line if the joint move would sag too low."""
+        start = self.joints
+        step = self.joint_move(xyz, yaw, what)
+        if trajectory_tcp_positions(step.trajectory, self.config.tool_offset)[:, 2].min() >= lowest_allowed_z:
+            return step
+        self.joints = start
+        return self.line(xyz, yaw, what)
+
+
+def _target_point(target: Target) -> tuple[float, float]:
+    if isinstance(target, ObjectInfo):
+        return float(target.position[0]), float(target.position[1])
+    values = [float(v) for v in target]
+    if len(values) not in (2, 3) or not all(math.isfinite(v) for v in values):
+        raise PickPlaceError(PickPlaceErrorCode.TARGET_NOT_FOUND, f'target point {values} is not an x, y point')
+    return values[0], values[1]
+
+
+def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[float],
+                    config: PickPlaceConfig = PickPlaceConfig(), obstacle_height: float | None = None
+                    ) -> PickPlacePlan:
+    """Plan picking `obj` and placing it on `target` (an object, or an x, y point of the table) from `current_joints`.
+
+    `obstacle_height` is the top of the tallest thing the held object must pass over (default: the target's and
+    the object's own tops). Raises PickPlaceError with the result code when it cannot be done.
+    """
+    workspace = config.workspace
+    target_xy = _target_point(target)
+    target_object = target if isinstance(target, ObjectInfo) else None
+    if not workspace.contains_xy(obj.position[0], obj.position[1]):
+        raise PickPlaceError(PickPlaceErrorCode.OUTSIDE_WORKSPACE,
+                             f'the {obj.name} at ({obj.position[0]:.3f}, {obj.position[1]:.3f}) is outside the '
+                             f'workspace ({workspace.describe()})')
+    target_description = f'the {target_object.name}' if target_object else \
+        f'({target_xy[0]:.3f}, {target_xy[1]:.3f})'
+    if not workspace.contains_xy(*target_xy):
+        where = f'{target_object.name} at ' if target_object else 'point '
+        raise PickPlaceError(PickPlaceErrorCode.OUTSIDE_WORKSPACE,
+                             f'the target {where}({target_xy[0]:.3f}, {target_xy[1]:.3f}) is outside the workspace '
+                             f'({workspace.describe()})')
+    if target_object is not None and target_object.name == obj.name:
+        raise PickPlaceError(PickPlaceErrorCode.TARGET_NOT_FOUND, f'cannot place the {obj.name} on itself')
+
+    # Grasp across the narrower side that fits between the open fingers. The fingers close along the TCP y axis,
+    # so at yaw = object yaw they close across the object's second extent.
+    room = config.gripper_open_width - 2 * config.gripper_side_room
+    widths = {0: obj.size[1], 1: obj.size[0]}  # quarter turns -> width between the fingers
+    fitting = [quarter for quarter, width in widths.items() if width <= room]
+    if not fitting:
+        raise PickPlaceError(PickPlaceErrorCode.GRASP_MISSED,
+                             f'the {obj.name} ({min(obj.size[:2]) * 1000:.0f} mm wide) does not fit in the gripper '
+                             f'(opens {config.gripper_open_width * 1000:.0f} mm)')
+    grasp_width = min(widths[q] for q in fitting)
+    quarters = [q for q in fitting if math.isclose(widths[q], grasp_width, abs_tol=0.005)]
+
+    table_z = workspace.table_z
+    lowest_tcp = table_z + workspace.min_tcp_height
+    grasp_z = max(obj.bottom + config.grasp_height_fraction * obj.size[2], lowest_tcp)
+    held_below_tcp = grasp_z - obj.bottom  # from the TCP down to the held object's bottom
+    if target_object is None:
+        place_z = table_z + held_below_tcp + config.place_clearance
+    elif target_object.category == CATEGORY_BOWL:
+        place_z = target_object.bottom + config.bowl_floor_thickness + held_below_tcp + config.place_clearance
+    else:
+        place_z = target_object.top + held_below_tcp + config.place_clearance
+    place_z = max(place_z, lowest_tcp)
+    highest_below = max(obstacle_height if obstacle_height is not None else table_z, obj.top,
+                        target_object.top if target_object else table_z)
+    travel_z = max(config.travel_height, highest_below + config.travel_clearance + held_below_tcp,
+                   place_z + 0.02, grasp_z + 0.02)
+    lowest_travel_z = travel_z - config.allowed_sag
+
+    planner = _Planner(config, current_joints)
+    above_object = (obj.position[0], obj.position[1], travel_z)
+    grasp_point = (obj.position[0], obj.position[1], grasp_z)
+    above_target = (target_xy[0], target_xy[1], travel_z)
+    place_point = (target_xy[0], target_xy[1], place_z)
+
+    # Approach: rise straight up first if the gripper is low (it may be among objects), then move above the object.
+    approach_steps: list[Step] = [GripperStep(config.gripper_open_width)]
+    start_tcp = forward_kinematics(planner.joints, config.tool_offset)
+    if start_tcp[2, 3] < lowest_travel_z and start_tcp[2, 2] < -0.99:
+        start_yaw = math.atan2(start_tcp[1, 0], start_tcp[0, 0])
+        approach_steps.append(planner.line((start_tcp[0, 3], start_tcp[1, 3], travel_z), start_yaw,
+                                           'the travel height'))
+    grasp_yaw = planner.best_yaw(grasp_point, [obj.yaw + q * math.pi / 2 + k * math.pi for q in quarters
+                                               for k in (-1, 0, 1)], f'the {obj.name}')
+    approach_steps.append(planner.travel(above_object, grasp_yaw, f'above the {obj.name}', lowest_travel_z))
+    descend = planner.line(grasp_point, grasp_yaw, f'the {obj.name}')
+    lift = planner.line(above_object, grasp_yaw, f'above the {obj.name}')
+
+    # Keep the held object's faces turned the same way in the world (or square with a target block).
+    base_yaw = target_object.yaw if target_object is not None and target_object.category != CATEGORY_BOWL \
+        else grasp_yaw
+    place_yaw = planner.best_yaw(place_point, [base_yaw + k * math.pi / 2 for k in range(-4, 5)],
+                                 target_description)
+    move = planner.travel(above_target, place_yaw, f'above {target_description}', lowest_travel_z)
+    place = planner.line(place_point, place_yaw, target_description, stop_on_contact=True)
+    retreat = planner.line(above_target, place_yaw, f'above {target_description}')
+
+    tolerance = config.grasp_width_tolerance
+    stages = [
+        Stage(StageName.APPROACH, approach_steps, failure_code=PickPlaceErrorCode.IK_FAILED),
+        Stage(StageName.DESCEND, [descend], failure_code=PickPlaceErrorCode.IK_FAILED),
+        Stage(StageName.GRASP, [GripperStep(0.0, config.grip_force)]),
+        Stage(StageName.VERIFY, [], [GraspCheck(max(grasp_width - tolerance, 0.002), grasp_width + tolerance,
+                                                config.require_stalled)], PickPlaceErrorCode.GRASP_MISSED),
+        Stage(StageName.LIFT, [lift], [LiftCheck(obj.name, max(grasp_width - tolerance, 0.002))],
+              PickPlaceErrorCode.OBJECT_DROPPED),
+        Stage(StageName.MOVE, [move], failure_code=PickPlaceErrorCode.IK_FAILED),
+        Stage(StageName.PLACE, [place], failure_code=PickPlaceErrorCode.IK_FAILED),
+        Stage(StageName.RELEASE, [GripperStep(min(config.gripper_open_width,
+                                                  grasp_width + 2 * config.release_side_room))]),
+        Stage(StageName.RETREAT, [retreat], [PlacedCheck(obj.name, target_xy, config.place_tolerance)],
+              PickPlaceErrorCode.OBJECT_DROPPED),
+    ]
+    for index, stage in enumerate(stages):
+        stage.progress = (index + 1) / len(stages)
+    return PickPlacePlan(obj, target_xy, target_description, stages, grasp_yaw, place_yaw, travel_z, grasp_z,
+                         place_z, config)

@@ -1,0 +1,73 @@
+"""Conversions between cap_control's plain data and ROS messages (message types only, no rclpy)."""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+from builtin_interfaces.msg import Duration
+from geometry_msgs.msg import Point
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
+from trajectory_msgs.msg import JointTrajectoryPoint
+
+from cap_interfaces.action import FollowJointTrajectory, GripperCommand
+from cap_interfaces.msg import JointTolerance
+from cap_interfaces.msg import ObjectState as ObjectStateMsg
+from cap_control.pick_place import GripperStep, ObjectInfo, TrajectoryStep, yaw_of_quaternion
+from cap_control.trajectory import JointTrajectory
+
+GRIPPER_FINGER_JOINTS = ('gripper_left_finger_joint', 'gripper_right_finger_joint')
+
+
+def duration_msg(seconds: float) -> Duration:
+    nanoseconds = int(round(seconds * 1e9))
+    return Duration(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+
+def trajectory_msg(trajectory: JointTrajectory) -> JointTrajectoryMsg:
+    return JointTrajectoryMsg(joint_names=list(trajectory.joint_names), points=[
+        JointTrajectoryPoint(positions=q.tolist(), velocities=v.tolist(), accelerations=a.tolist(),
+                             time_from_start=duration_msg(float(t)))
+        for t, q, v, a in zip(trajectory.times, trajectory.positions, trajectory.velocities,
+                              trajectory.accelerations)])
+
+
+def follow_trajectory_goal(step: TrajectoryStep, trajectory: JointTrajectory) -> FollowJointTrajectory.Goal:
+    """The goal for one trajectory step; a stop-on-contact step gets a path tolerance of its contact tolerance, so
+    that the controller aborts with PATH_TOLERANCE_VIOLATED where the arm touches down."""
+    goal = FollowJointTrajectory.Goal(trajectory=trajectory_msg(trajectory))
+    if step.stop_on_contact:
+        goal.path_tolerance = [JointTolerance(name=name, position=step.contact_tolerance, velocity=-1.0,
+                                              acceleration=-1.0) for name in trajectory.joint_names]
+    return goal
+
+
+def gripper_goal(step: GripperStep) -> GripperCommand.Goal:
+    return GripperCommand.Goal(position=float(step.position), max_effort=float(step.max_effort))
+
+
+def object_info(state: ObjectStateMsg) -> ObjectInfo:
+    """Perception's object state (axis-aligned box + orientation) as the planner's object."""
+    q = state.orientation
+    yaw = yaw_of_quaternion(q.x, q.y, q.z, q.w) if (q.x, q.y, q.z, q.w) != (0.0, 0.0, 0.0, 0.0) else 0.0
+    return ObjectInfo.from_bounding_box(
+        state.name, (state.bbox_min.x, state.bbox_min.y, state.bbox_min.z),
+        (state.bbox_max.x, state.bbox_max.y, state.bbox_max.z), state.category, yaw)
+
+
+def joint_positions(msg: JointState, names: Sequence[str]) -> np.ndarray | None:
+    """Positions of the named joints from a JointState message, or None if one is missing."""
+    index = {name: i for i, name in enumerate(msg.name)}
+    if any(name not in index or index[name] >= len(msg.position) for name in names):
+        return None
+    return np.array([msg.position[index[name]] for name in names])
+
+
+def gripper_opening(msg: JointState) -> float | None:
+    """Opening between the finger pads [m]: the sum of the two finger joints (each = pad distance from the tcp)."""
+    fingers = joint_positions(msg, GRIPPER_FINGER_JOINTS)
+    return None if fingers is None else float(np.sum(fingers))
+
+
+def point_msg(xyz: Sequence[float]) -> Point:
+    return Point(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))

@@ -1,0 +1,254 @@
+"""Pick-and-place plans: the right stages in the right order, safe heights, workspace limits, clear failures."""
+import math
+import re
+
+import numpy as np
+import pytest
+from cap_interfaces.action import PickPlace
+
+from cap_control.kinematics import HOME_JOINTS, forward_kinematics, inverse_kinematics, top_down_pose
+from cap_control.pick_place import (
+    GripperStep, LiftCheck, ObjectInfo, Observation, PickPlaceConfig, PickPlaceError,
+    PickPlaceErrorCode, PlacedCheck, StageName, TrajectoryStep, Workspace, plan_pick_place,
+    yaw_of_quaternion,
+)
+from cap_control.trajectory import UR5E_LIMITS, trajectory_tcp_positions
+
+BLOCK_SIZE = (0.04, 0.04, 0.04)
+STAGE_ORDER = ['approach', 'descend', 'grasp', 'verify', 'lift', 'move', 'place', 'release', 'retreat']
+
+
+def block(name: str, x: float, y: float, yaw: float = 0.0, z: float = 0.02) -> ObjectInfo:
+    return ObjectInfo(name, (x, y, z), BLOCK_SIZE, 'block', yaw)
+
+
+def bowl(name: str, x: float, y: float) -> ObjectInfo:
+    return ObjectInfo(name, (x, y, 0.03), (0.14, 0.14, 0.06), 'bowl')
+
+
+def trajectory_steps(plan):
+    return [(stage.name, step) for stage in plan.stages for step in stage.steps if isinstance(step, TrajectoryStep)]
+
+
+def stage(plan, name: StageName):
+    return next(s for s in plan.stages if s.name == name)
+
+
+def test_error_codes_and_stage_names_are_those_of_the_action():
+    for code in PickPlaceErrorCode:
+        assert getattr(PickPlace.Result, code.name) == code.value
+    for name in StageName:
+        assert getattr(PickPlace.Feedback, 'STAGE_' + name.name) == name.value
+
+
+def test_block_into_bowl_plan_runs_the_stages_in_order_and_chains_its_motions():
+    red, blue_bowl = block('red block', 0.1, -0.6, yaw=0.3), bowl('blue bowl', -0.2, -0.4)
+    plan = plan_pick_place(red, blue_bowl, HOME_JOINTS)
+    assert [s.name.value for s in plan.stages] == STAGE_ORDER
+    assert [s.progress for s in plan.stages] == sorted(s.progress for s in plan.stages)
+    assert plan.stages[-1].progress == 1.0
+    joints = HOME_JOINTS
+    for _, step in trajectory_steps(plan):
+        np.testing.assert_allclose(step.trajectory.start, joints, atol=1e-12)
+        assert np.all(np.abs(step.trajectory.velocities) <= UR5E_LIMITS.velocity * (1 + 1e-6))
+        joints = step.trajectory.end
+    # Gripper: open on the way, closed with force to grasp, open to release.
+    assert isinstance(stage(plan, StageName.APPROACH).steps[0], GripperStep)
+    assert stage(plan, StageName.APPROACH).steps[0].position >= 0.08
+    close = stage(plan, StageName.GRASP).steps[0]
+    assert close.position == 0.0 and close.max_effort > 0
+    assert 0.05 <= stage(plan, StageName.RELEASE).steps[0].position <= 0.07, 'opens enough, not against a bowl wall'
+
+
+def test_grasp_holds_the_block_at_its_middle_square_to_its_faces():
+    red = block('red block', -0.15, -0.7, yaw=0.4)
+    plan = plan_pick_place(red, (0.2, -0.3), HOME_JOINTS)
+    grasp_pose = forward_kinematics(stage(plan, StageName.DESCEND).steps[-1].trajectory.end)
+    np.testing.assert_allclose(grasp_pose[:3, 3], red.position, atol=1e-6)
+    np.testing.assert_allclose(grasp_pose[:3, 2], [0, 0, -1], atol=1e-6)
+    yaw = math.atan2(grasp_pose[1, 0], grasp_pose[0, 0])
+    assert math.remainder(yaw - 0.4, math.pi / 2) == pytest.approx(0.0, abs=1e-6)
+    descent = trajectory_tcp_positions(stage(plan, StageName.DESCEND).steps[-1].trajectory)
+    np.testing.assert_allclose(descent[:, :2], [red.position[:2]] * len(descent), atol=1e-6)
+    assert not stage(plan, StageName.DESCEND).steps[-1].stop_on_contact
+
+
+@pytest.mark.parametrize('target_kind', ['block', 'bowl', 'table'])
+def test_place_height_stacks_on_blocks_drops_into_bowls_and_sets_down_on_the_table(target_kind):
+    red = block('red block', 0.15, -0.45)
+    target = {'block': block('green block', -0.1, -0.65, yaw=0.2), 'bowl': bowl('blue bowl', -0.1, -0.65),
+              'table': (-0.1, -0.65)}[target_kind]
+    plan = plan_pick_place(red, target, HOME_JOINTS)
+    place_step = stage(plan, StageName.PLACE).steps[0]
+    assert place_step.stop_on_contact and place_step.contact_tolerance > 0
+    place_pose = forward_kinematics(place_step.trajectory.end)
+    np.testing.assert_allclose(place_pose[:2, 3], [-0.1, -0.65], atol=1e-6)
+    held_bottom = place_pose[2, 3] - (plan.grasp_z - red.bottom)
+    if target_kind == 'block':
+        assert 0.0 < held_bottom - target.top <= 0.01, 'released just above the block below'
+        yaw = math.atan2(place_pose[1, 0], place_pose[0, 0])
+        assert math.remainder(yaw - 0.2, math.pi / 2) == pytest.approx(0.0, abs=1e-6), 'square with the block'
+    elif target_kind == 'bowl':
+        assert target.bottom < held_bottom < target.top - 0.02, 'released inside the bowl, below its rim'
+    else:
+        assert 0.0 < held_bottom <= 0.01, 'released just above the table'
+
+
+def test_the_held_block_passes_high_over_everything_while_moving():
+    red = block('red block', 0.2, -0.75)
+    tall_stack_top = 0.12
+    plan = plan_pick_place(red, block('blue block', -0.2, -0.25, z=tall_stack_top - 0.02), HOME_JOINTS,
+                           obstacle_height=tall_stack_top)
+    held_below_tcp = plan.grasp_z - red.bottom
+    for name in (StageName.MOVE,):
+        tcp = trajectory_tcp_positions(stage(plan, name).steps[0].trajectory)
+        assert tcp[:, 2].min() - held_below_tcp >= tall_stack_top + 0.01
+
+
+def test_no_motion_goes_below_the_table_safety_height():
+    config = PickPlaceConfig()
+    rng = np.random.default_rng(3)
+    for _ in range(8):
+        obj = block('red block', rng.uniform(-0.2, 0.2), rng.uniform(-0.7, -0.3), rng.uniform(-1, 1))
+        plan = plan_pick_place(obj, (rng.uniform(-0.25, 0.25), rng.uniform(-0.75, -0.25)), HOME_JOINTS)
+        for _, step in trajectory_steps(plan):
+            tcp = trajectory_tcp_positions(step.trajectory)
+            assert tcp[:, 2].min() >= config.workspace.table_z + config.workspace.min_tcp_height - 1e-9
+
+
+@pytest.mark.parametrize('corner', [(-0.25, -0.25), (0.25, -0.25), (-0.25, -0.75), (0.25, -0.75), (0.0, -0.5)])
+def test_blocks_can_be_placed_on_every_corner(corner):
+    plan = plan_pick_place(block('red block', 0.05, -0.5, 0.7), corner, HOME_JOINTS)
+    np.testing.assert_allclose(plan.target_xy, corner)
+
+
+@pytest.mark.parametrize('obj, target, words', [
+    (block('red block', 0.45, -0.5), (0.0, -0.5), 'the red block at (0.450, -0.500) is outside the workspace'),
+    (block('red block', 0.0, -0.5), (0.0, -0.95), 'the target point (0.000, -0.950) is outside the workspace'),
+    (block('red block', 0.0, -0.5), bowl('blue bowl', 0.0, -0.1), 'the target blue bowl at (0.000, -0.100)'),
+    (block('red block', 0.0, -0.5), (-0.31, -0.5), 'outside the workspace'),
+])
+def test_objects_and_targets_outside_the_workspace_are_refused(obj, target, words):
+    with pytest.raises(PickPlaceError, match=re.escape(words)) as raised:
+        plan_pick_place(obj, target, HOME_JOINTS)
+    assert raised.value.code == PickPlaceErrorCode.OUTSIDE_WORKSPACE
+
+
+def test_a_narrower_workspace_is_enforced_whatever_the_target():
+    config = PickPlaceConfig(workspace=Workspace(x_min=-0.1, x_max=0.1))
+    with pytest.raises(PickPlaceError) as raised:
+        plan_pick_place(block('red block', 0.0, -0.5), (0.2, -0.5), HOME_JOINTS, config)
+    assert raised.value.code == PickPlaceErrorCode.OUTSIDE_WORKSPACE
+
+
+def test_an_object_too_wide_for_the_gripper_is_refused():
+    big = ObjectInfo('gray box', (0.0, -0.5, 0.05), (0.2, 0.2, 0.1))
+    with pytest.raises(PickPlaceError, match='does not fit in the gripper') as raised:
+        plan_pick_place(big, (0.1, -0.3), HOME_JOINTS)
+    assert raised.value.code == PickPlaceErrorCode.GRASP_MISSED
+
+
+def test_a_long_object_is_grasped_across_its_narrow_side():
+    bar = ObjectInfo('brown bar', (0.0, -0.5, 0.02), (0.12, 0.03, 0.04), yaw=0.25)
+    plan = plan_pick_place(bar, (0.1, -0.3), HOME_JOINTS)
+    fingers = forward_kinematics(stage(plan, StageName.DESCEND).steps[0].trajectory.end)[:3, 1]
+    across_bar = np.array([-math.sin(0.25), math.cos(0.25), 0.0])
+    assert abs(fingers @ across_bar) == pytest.approx(1.0, abs=1e-6)
+    grasp_check = stage(plan, StageName.VERIFY).checks[0]
+    assert grasp_check.min_gap < 0.03 < grasp_check.max_gap
+
+
+def test_placing_an_object_on_itself_is_refused():
+    red = block('red block', 0.0, -0.5)
+    with pytest.raises(PickPlaceError) as raised:
+        plan_pick_place(red, red, HOME_JOINTS)
+    assert raised.value.code == PickPlaceErrorCode.TARGET_NOT_FOUND
+
+
+def test_grasp_check_tells_a_missed_grasp_from_a_held_block():
+    plan = plan_pick_place(block('red block', 0.0, -0.5), (0.1, -0.3), HOME_JOINTS)
+    verify = stage(plan, StageName.VERIFY)
+    assert verify.failure_code == PickPlaceErrorCode.GRASP_MISSED
+    check = verify.checks[0]
+    assert check.failure(Observation(gripper_position=0.0395, gripper_stalled=True)) is None
+    assert 'closed to 0.0 mm' in check.failure(Observation(gripper_position=0.0, gripper_stalled=False))
+    assert 'did not stop' in check.failure(Observation(gripper_position=0.04, gripper_stalled=False))
+    assert 'wider' in check.failure(Observation(gripper_position=0.08, gripper_stalled=True))
+
+
+def test_lift_and_place_checks_notice_a_dropped_or_misplaced_block():
+    plan = plan_pick_place(block('red block', 0.0, -0.5), (0.1, -0.3), HOME_JOINTS)
+    lift = stage(plan, StageName.LIFT)
+    assert lift.failure_code == PickPlaceErrorCode.OBJECT_DROPPED
+    (lift_check,) = lift.checks
+    assert isinstance(lift_check, LiftCheck) and not lift_check.needs_object_position
+    assert lift_check.failure(Observation(gripper_position=0.0395)) is None
+    assert 'fingers closed to 0.0 mm' in lift_check.failure(Observation(gripper_position=0.0))
+    assert 'cannot tell' in lift_check.failure(Observation())
+    (placed_check,) = stage(plan, StageName.RETREAT).checks
+    assert isinstance(placed_check, PlacedCheck)
+    assert placed_check.failure(Observation(object_position=(0.11, -0.31, 0.02))) is None
+    assert 'from the target' in placed_check.failure(Observation(object_position=(0.0, -0.5, 0.02)))
+    # Hidden from the camera, the object is not judged on a remembered place.
+    assert placed_check.failure(Observation(object_position=(0.0, -0.5, 0.02), object_visible=False)) is None
+    assert 'not found' in placed_check.failure(Observation())
+
+
+def test_after_touching_down_early_the_retreat_starts_from_where_the_arm_stopped():
+    red, green = block('red block', 0.1, -0.6), block('green block', -0.1, -0.4)
+    plan = plan_pick_place(red, green, HOME_JOINTS)
+    place = stage(plan, StageName.PLACE).steps[0].trajectory
+    stopped = place.positions[len(place) // 2]  # contact halfway down
+    retreat_step = stage(plan, StageName.RETREAT).steps[0]
+    retreat = plan.trajectory_for(retreat_step, stopped)
+    np.testing.assert_array_equal(retreat.start, stopped)
+    np.testing.assert_allclose(forward_kinematics(retreat.end), forward_kinematics(retreat_step.trajectory.end),
+                               atol=1e-6)
+    tcp = trajectory_tcp_positions(retreat)
+    np.testing.assert_allclose(tcp[:, :2], [[-0.1, -0.4]] * len(tcp), atol=1e-6)
+    # At the planned start, the planned trajectory is used as is.
+    assert plan.trajectory_for(retreat_step, retreat_step.trajectory.start) is retreat_step.trajectory
+
+
+def test_from_a_low_gripper_the_arm_first_rises_straight_up():
+    low = inverse_kinematics(top_down_pose((0.2, -0.3, 0.03), 0.0))
+    plan = plan_pick_place(block('red block', -0.2, -0.7), (0.0, -0.5), low)
+    first = next(step for step in stage(plan, StageName.APPROACH).steps if isinstance(step, TrajectoryStep))
+    tcp = trajectory_tcp_positions(first.trajectory)
+    np.testing.assert_allclose(tcp[:, :2], [[0.2, -0.3]] * len(tcp), atol=1e-6)
+    assert tcp[-1, 2] == pytest.approx(plan.travel_z)
+
+
+def test_bounding_box_of_a_turned_block_gives_back_its_sides():
+    for yaw in (0.0, 0.3, math.pi / 4, 1.2, -0.5):
+        c, s = abs(math.cos(yaw)), abs(math.sin(yaw))
+        half = 0.02 * (c + s)
+        obj = ObjectInfo.from_bounding_box('red block', (0.1 - half, -0.5 - half, 0.0), (0.1 + half, -0.5 + half, 0.04),
+                                           yaw=yaw)
+        np.testing.assert_allclose(obj.size, BLOCK_SIZE, atol=1e-9)
+        np.testing.assert_allclose(obj.position, (0.1, -0.5, 0.02), atol=1e-12)
+    bar = ObjectInfo.from_bounding_box('bar', (-0.06, -0.015, 0.0), (0.06, 0.015, 0.04), yaw=0.0)
+    np.testing.assert_allclose(bar.size, (0.12, 0.03, 0.04))
+
+
+def test_random_episodes_of_the_benchmark_all_plan():
+    rng = np.random.default_rng(42)
+    joints = HOME_JOINTS
+    for _ in range(15):
+        obj = block('red block', rng.uniform(-0.2, 0.2), rng.uniform(-0.7, -0.3), rng.uniform(-math.pi, math.pi))
+        kind = rng.integers(3)
+        where = (rng.uniform(-0.25, 0.25), rng.uniform(-0.75, -0.25))
+        target = [block('blue block', *where, yaw=rng.uniform(-1, 1)), bowl('blue bowl', *where), where][kind]
+        plan = plan_pick_place(obj, target, joints)
+        assert plan.duration < 15.0
+        joints = trajectory_steps(plan)[-1][1].trajectory.end  # the next episode starts where this one ended
+
+
+def test_yaw_of_a_block_is_read_whichever_face_it_rests_on():
+    from scipy.spatial.transform import Rotation
+
+    for yaw in (0.0, 0.3, -1.1, 2.0):
+        upright = Rotation.from_euler('z', yaw).as_quat()  # x, y, z, w
+        assert math.remainder(yaw_of_quaternion(*upright) - yaw, math.pi / 2) == pytest.approx(0.0, abs=1e-9)
+        on_its_side = (Rotation.from_euler('z', yaw) * Rotation.from_euler('x', math.pi / 2)).as_quat()
+        assert math.remainder(yaw_of_quaternion(*on_its_side) - yaw, math.pi / 2) == pytest.approx(0.0, abs=1e-9)
