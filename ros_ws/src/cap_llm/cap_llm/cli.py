@@ -5,6 +5,7 @@
     cap stop                                         stop the running program and every motion
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
     cap demo                                         the table-top demo (see cap_llm/demo.py)
+    cap bench tabletop --trials 1                    the paper's table-top benchmark (see cap_bench/runner.py)
 
 Uses the ROS_DOMAIN_ID of the environment; discovery stays on this host unless ROS_AUTOMATIC_DISCOVERY_RANGE says
 otherwise.
@@ -210,7 +211,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help='cassette (offline replay) or http (CAP_LLM_BASE_URL, CAP_LLM_MODEL, CAP_LLM_API_KEY)')
     p_up.add_argument('--cassette', default='', help='cassette file (default: the packaged reference cassette)')
     p_up.add_argument('--record', action='store_true', help='with --backend http: record answers into --cassette')
-    commands.add_parser('demo', help='run the table-top demo (options: cap demo -- --help)', add_help=False)
+    commands.add_parser('demo', help='run the table-top demo (options: cap demo --help)', add_help=False)
+    commands.add_parser('bench', help='the paper\'s table-top benchmark (cap bench tabletop --help)', add_help=False)
     p_send = commands.add_parser('send', help='run a natural-language command and follow it to the end')
     p_send.add_argument('text', help='the command, e.g. "put the red block in the blue bowl"')
     p_send.add_argument('--timeout', type=float, default=600.0, help='give up after this many seconds [600]')
@@ -229,6 +231,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv[:1] == ['demo']:
         from cap_llm import demo
         return demo.main([a for a in argv[1:] if a != '--'])
+    if argv[:2] == ['bench', 'tabletop']:
+        # cap_bench builds on cap_llm, so it is imported only when asked for (no dependency cycle).
+        from cap_bench import runner
+        return runner.main(argv[2:])
     args = build_parser().parse_args(argv)
     if args.command == 'up':
         return up(args.seed, args.objects, args.real_time, args.perception, args.backend, args.cassette, args.record)

@@ -146,6 +146,11 @@ class LmpNode(Node):
             result.success = bool(job.result.success)
             result.code = job.result.code
             result.message = job.result.message or 'done'
+            result.model_calls = int(job.result.model_calls)
+            result.prompt_tokens = int(job.result.prompt_tokens)
+            result.completion_tokens = int(job.result.completion_tokens)
+            result.model_seconds = float(job.result.timings.get('model_s', 0.0))
+            result.total_seconds = float(job.result.timings.get('total_s', 0.0))
         else:
             result.message = {'refused': 'refused: too many commands waiting',
                               'cancelled': 'cancelled before it ran'}.get(job.outcome, job.outcome)

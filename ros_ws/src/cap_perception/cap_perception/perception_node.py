@@ -13,13 +13,15 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from geometry_msgs.msg import PoseStamped
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
+from std_srvs.srv import Trigger
 
 from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import GetObjectNames, GetObjectState
-from cap_perception.rgbd_detector import CameraView, DetectorConfig, detect
+from cap_perception.rgbd_detector import CameraView, DetectorConfig, detect, empty_table_at
 from cap_perception.ros_conversions import from_msg, image_to_array, to_msg
 from cap_perception.sources import (NoObservationError, SnapshotSource, UnknownObjectError, load_stub_objects,
                                     remember_unseen)
@@ -28,6 +30,13 @@ SOURCES = ('ground_truth', 'rgbd', 'stub')
 
 # Only the latest object array matters: keep one, reliably delivered.
 OBJECTS_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def _pose_matrix(position, orientation_xyzw) -> np.ndarray:
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_quat(orientation_xyzw).as_matrix()
+    pose[:3, 3] = position
+    return pose
 
 
 def _stamp_seconds(header) -> float:
@@ -59,6 +68,8 @@ class PerceptionNode(Node):
                             callback_group=services)
         self.create_service(GetObjectState, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE, self._on_state,
                             callback_group=services)
+        self.create_service(Trigger, GraphNames.PERCEPTION_FORGET_SERVICE, self._on_forget, callback_group=services)
+        self._stub_objects = self.source.objects() if source == 'stub' else None
         self.get_logger().info(f'serving objects from {self.source.description}')
 
     def _parameter(self, name: str, default, description: str):
@@ -71,15 +82,16 @@ class PerceptionNode(Node):
     # ------------------------------------------------------------------------------------------ RGB-D detector
     def _start_detector(self) -> None:
         camera = self._parameter('camera', 'top', 'Camera whose images the detector reads '
-                                 '(topics <camera namespace>/<camera>/{color,depth,camera_info}).')
-        position = self._parameter('camera_position', [0.0, -0.5, 1.0],
+                                 '(topics <camera namespace>/<camera>/{color,depth,camera_info,pose}).')
+        use_pose_topic = self._parameter('camera_pose_from_topic', True, 'Take the camera pose from the latched '
+                                         '<camera>/pose topic (the sim bridge publishes it); false: use the '
+                                         'camera_position and camera_orientation parameters.')
+        position = self._parameter('camera_position', [0.0, -0.5, 0.85],
                                    'Camera optical frame origin in the world frame [m] (extrinsic calibration).')
         orientation = self._parameter('camera_orientation', [1.0, 0.0, 0.0, 0.0],
                                       'Camera optical frame orientation in the world frame, quaternion x, y, z, w '
                                       '(ROS optical convention: +z forward, +y down).')
-        self._world_from_optical = np.eye(4)
-        self._world_from_optical[:3, :3] = Rotation.from_quat(orientation).as_matrix()
-        self._world_from_optical[:3, 3] = position
+        self._world_from_optical = None if use_pose_topic else _pose_matrix(position, orientation)
         self._detector_config = DetectorConfig()
         self._frames_lock = threading.Lock()
         self._color: Image | None = None
@@ -95,6 +107,16 @@ class PerceptionNode(Node):
                                  qos_profile_sensor_data, callback_group=images)
         self.create_subscription(CameraInfo, f'{prefix}/camera_info', self._on_camera_info,
                                  qos_profile_sensor_data, callback_group=images)
+        if use_pose_topic:
+            # The pose is published once and latched: subscribe transient-local to get it whenever we join.
+            latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            self.create_subscription(PoseStamped, f'{prefix}/pose', self._on_camera_pose, latched,
+                                     callback_group=images)
+
+    def _on_camera_pose(self, msg: PoseStamped) -> None:
+        p, q = msg.pose.position, msg.pose.orientation
+        self._world_from_optical = _pose_matrix([p.x, p.y, p.z], [q.x, q.y, q.z, q.w])
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
         self._camera_matrix = np.array(msg.k, dtype=float).reshape(3, 3)
@@ -104,7 +126,8 @@ class PerceptionNode(Node):
             setattr(self, f'_{kind}', msg)
             color, depth = self._color, self._depth
         # Colour and depth of one frame carry the same stamp; analyse each frame once.
-        if color is None or depth is None or self._camera_matrix is None or color.header.stamp != depth.header.stamp:
+        if (color is None or depth is None or self._camera_matrix is None or self._world_from_optical is None
+                or color.header.stamp != depth.header.stamp):
             return
         stamp = _stamp_seconds(color.header)
         if stamp <= self._last_detected_stamp:
@@ -117,9 +140,19 @@ class PerceptionNode(Node):
             self.get_logger().error(str(error), throttle_duration_sec=5.0)
             return
         detected = detect(view, self._detector_config)
-        self.source.update(remember_unseen(self.source.objects(), detected), stamp)
+        self.source.update(remember_unseen(self.source.objects(), detected,
+                                           gone=lambda obj: empty_table_at(view, obj.position)), stamp)
 
     # ------------------------------------------------------------------------------------------ services
+    def _on_forget(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        if self._stub_objects is not None:
+            response.message = 'the stub source is fixed; nothing to forget'
+        else:
+            self.source.clear()
+            response.message = f'forgot every object; waiting for the next observation from {self.source.description}'
+        response.success = True
+        return response
+
     def _on_names(self, request: GetObjectNames.Request, response: GetObjectNames.Response):
         try:
             response.names = self.source.names(visible_only=request.visible_only)

@@ -5,8 +5,10 @@
 2. Label each kept pixel with the nearest palette colour by chromaticity: dividing RGB by its largest channel
    cancels most of the shading, which scales all channels alike.
 3. Per colour, join the labelled pixels into connected regions and regions into objects by distance in the world.
-4. Tell a block from a bowl by size: a block spans about one block edge, a bowl three times that. A bowl may hold
-   a block of its own colour: that block shows as a cluster near the bowl's centre standing higher than its floor.
+4. Find blocks by their solid top: in a top view of the colour's points (a 2 mm grid of the world xy plane), the
+   cells standing higher than a bowl's floor are eroded by most of a block's half width; a bowl's thin rim
+   vanishes and each block leaves a core. What is left of the colour, away from its blocks, is a bowl if it spans
+   more than a block. So a block beside or inside a bowl of its own colour is told apart from the bowl.
 
 Works best from above (the `top` camera): every block's top face and every bowl's floor is seen. A block hidden
 under another is not detected; the perception source keeps it as not visible at its last known place.
@@ -96,7 +98,7 @@ def detect(view: CameraView, config: DetectorConfig = DetectorConfig()) -> list[
 
 
 def _objects_of_one_color(mask: np.ndarray, points: np.ndarray, config: DetectorConfig) -> list[np.ndarray]:
-    """World points per object: connected regions, joined when they lie close together in the world."""
+    """World points per object candidate: connected regions, joined when they lie close together in the world."""
     count, regions, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     groups: list[np.ndarray] = []
     for region in range(1, count):
@@ -119,19 +121,54 @@ def _xy_gap(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(np.maximum(low - high, 0.0)))
 
 
+_GRID = 0.002  # top-view cell [m]
+
+
+def _block_cores(cloud: np.ndarray, config: DetectorConfig) -> list[np.ndarray]:
+    """Points of each block in a cloud of one colour, found by the solid top a bowl's rim does not have."""
+    high = cloud[cloud[:, 2] > 0.6 * config.block_size]
+    if len(high) < config.min_pixels:
+        return []
+    origin = high[:, :2].min(axis=0) - 0.01
+    cells = np.floor((high[:, :2] - origin) / _GRID).astype(int)
+    shape = cells.max(axis=0) + 3
+    grid = np.zeros((shape[1], shape[0]), np.uint8)
+    grid[cells[:, 1], cells[:, 0]] = 1
+    # Close pixel-sized holes of the sampled top, then erode: a 4 cm top keeps a core, a rim a few mm wide does not.
+    grid = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    radius = int(round(0.3 * config.block_size / _GRID))
+    core = cv2.erode(grid, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1)))
+    count, labels, stats, centroids = cv2.connectedComponentsWithStats(core, connectivity=8)
+    blocks = []
+    for label in range(1, count):
+        centre = origin + (centroids[label] + 0.5) * _GRID
+        near = np.max(np.abs(cloud[:, :2] - centre), axis=1) < 0.5 * config.block_size + 0.004
+        members = cloud[near & (cloud[:, 2] > 0.6 * config.block_size)]
+        if len(members) >= config.min_pixels:
+            blocks.append(cloud[near])
+    return blocks
+
+
 def _classify(color: str, cloud: np.ndarray, config: DetectorConfig) -> list[PerceivedObject]:
-    extent = float(np.max(np.ptp(cloud[:, :2], axis=0)))
-    if extent < 0.5 * (config.block_size * np.sqrt(2) + config.bowl_diameter):
-        return [_block(color, cloud, config)]
-    bowl = _bowl(color, cloud, config)
-    # A same-coloured block inside the bowl stands above the bowl's floor, near its centre.
-    centre = np.array(bowl.position[:2])
-    near_centre = np.linalg.norm(cloud[:, :2] - centre, axis=1) < 0.5 * config.bowl_diameter - 0.01
-    floor = np.percentile(cloud[near_centre, 2], 10) if near_centre.any() else 0.0
-    raised = cloud[near_centre & (cloud[:, 2] > floor + 0.5 * config.block_size)]
-    if len(raised) >= config.min_pixels:
-        return [bowl, _block(color, raised, config)]
-    return [bowl]
+    found: list[PerceivedObject] = []
+    rest = cloud
+    for block_points in _block_cores(cloud, config):
+        block = _block(color, block_points, config)
+        found.append(block)
+        away = np.max(np.abs(rest[:, :2] - np.array(block.position[:2])), axis=1) > 0.5 * config.block_size + 0.006
+        rest = rest[away]
+    if len(rest) >= config.min_pixels and float(np.max(np.ptp(rest[:, :2], axis=0))) > 1.5 * config.block_size:
+        found.append(_bowl(color, rest, config))
+    return found
+
+
+def empty_table_at(view: CameraView, xy, radius: float = 0.012, config: DetectorConfig = DetectorConfig()) -> bool:
+    """True when the camera sees bare table around `xy`: whatever stood there is gone (not merely hidden)."""
+    points, valid = deproject(view)
+    near = valid & (np.linalg.norm(points[..., :2] - np.asarray(xy, dtype=np.float32)[:2], axis=-1) < radius)
+    if near.sum() < 10:
+        return False  # out of view or behind something: no evidence either way
+    return float(np.mean(points[near][:, 2] < config.min_height)) > 0.8
 
 
 def _block(color: str, cloud: np.ndarray, config: DetectorConfig) -> PerceivedObject:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 import threading
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import yaml
 
@@ -36,6 +36,11 @@ class SnapshotSource:
         snapshot = {obj.name: obj for obj in objects}
         with self._lock:
             self._objects, self._stamp = snapshot, stamp
+
+    def clear(self) -> None:
+        """Forget everything; answers wait for the next update."""
+        with self._lock:
+            self._objects, self._stamp = None, 0.0
 
     @property
     def stamp(self) -> float:
@@ -65,12 +70,14 @@ class SnapshotSource:
             return list(self._objects.values()) if self._objects else []
 
 
-def remember_unseen(previous: Iterable[PerceivedObject], seen: Iterable[PerceivedObject]) -> list[PerceivedObject]:
+def remember_unseen(previous: Iterable[PerceivedObject], seen: Iterable[PerceivedObject],
+                    gone: Callable[[PerceivedObject], bool] = lambda obj: False) -> list[PerceivedObject]:
     """What a camera sees now, plus every earlier object it no longer sees (hidden under another, or behind the arm),
-    kept at its last known place and marked not visible: objects do not vanish because they are occluded."""
+    kept at its last known place and marked not visible: objects do not vanish because they are occluded. An
+    unseen object for which `gone(obj)` holds (e.g. the camera sees bare table where it was) is forgotten."""
     current = {obj.name: obj for obj in seen}
     for obj in previous:
-        if obj.name not in current:
+        if obj.name not in current and not gone(obj):
             current[obj.name] = dataclasses.replace(obj, visible=False)
     return sorted(current.values(), key=lambda obj: obj.name)
 

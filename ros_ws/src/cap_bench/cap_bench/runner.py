@@ -1,0 +1,339 @@
+"""`cap bench tabletop`: the paper's simulated table-top benchmark through the real graph.
+
+Every episode goes the way of a user's command: the scene is reset through the sim bridge's service, the
+instruction is sent to lmp_node's /cap/execute action, the program (an oracle reference program replayed from a
+cassette, or a model's code from an OpenAI-compatible endpoint) runs in the sandbox and drives perception and
+pick-and-place over ROS, and the result is judged on the simulator's final state by cap_bench.success.
+
+Results are appended to episodes.jsonl as each episode ends, so an interrupted run resumes where it stopped
+(--resume). Parallel jobs run separate graphs in separate processes, each on its own ROS_DOMAIN_ID.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import multiprocessing
+import os
+import pathlib
+import sys
+import time
+from typing import Any, Iterable
+
+import numpy as np
+import yaml
+
+from cap_bench.episodes import Episode, sample_episode
+from cap_bench.oracle import oracle_program
+from cap_bench.report import write_report
+from cap_bench.success import check
+from cap_bench.templates import GROUPS, TEMPLATES
+
+SETTLE_S = 0.5  # simulated time the scene settles after the program before it is judged
+
+
+@dataclasses.dataclass
+class BenchOptions:
+    policy: str = 'oracle'  # or 'llm'
+    groups: tuple[str, ...] = tuple(GROUPS)
+    tasks: tuple[str, ...] = tuple(TEMPLATES)
+    trials: int = 50
+    perception: str = 'ground_truth'  # or 'rgbd'
+    base_seed: int = 0
+    jobs: int = 1
+    out: str = 'output/bench'
+    resume: bool = False
+    base_url: str = ''  # for policy=llm; empty: CAP_LLM_BASE_URL
+    model: str = ''
+    api: str = 'chat'
+    episode_timeout_s: float = 900.0
+    first_domain_id: int = 0  # 0: derived from the process id
+
+
+def plan(options: BenchOptions) -> list[Episode]:
+    episodes = []
+    for group in options.groups:
+        templates = [t for t in GROUPS[group][1] if t in options.tasks]
+        for template in templates:
+            for trial in range(options.trials):
+                episodes.append(sample_episode(group, template, options.base_seed + trial))
+    return episodes
+
+
+def episode_key(group: str, template: str, seed: int) -> str:
+    return f'{group}/{template}/{seed}'
+
+
+def write_oracle_cassette(episodes: Iterable[Episode], path: pathlib.Path) -> None:
+    """One reference program per distinct instruction (a program depends only on the instruction's attributes)."""
+    entries = {}
+    for episode in episodes:
+        entries[episode.instruction.lower()] = {
+            'lmp': 'tabletop_ui', 'query': episode.instruction, 'context': '*',
+            'source': f'written by hand as a reference program (cap_bench oracle, {episode.template})',
+            'completion': oracle_program(episode)}
+    path.write_text(yaml.safe_dump({'format': 'cap-llm-cassette/1', 'entries': list(entries.values())},
+                                   sort_keys=False, width=120))
+
+
+def _wait(predicate, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
+    return True
+
+
+class _EpisodeRunner:
+    """One graph (in this process) running episodes one after another."""
+
+    def __init__(self, options: BenchOptions, cassette: pathlib.Path | None) -> None:
+        import rclpy
+        from rclpy.action import ActionClient
+        from rclpy.context import Context
+        from std_srvs.srv import Trigger
+
+        from cap_interfaces.action import ExecuteCommand
+        from cap_interfaces.msg import GraphNames
+        from cap_interfaces.srv import ResetScene
+        from cap_llm.graph import Graph, GraphOptions
+
+        self.options = options
+        self.context = Context()
+        rclpy.init(context=self.context)
+        lmp: dict[str, Any] = {'time_limit_s': options.episode_timeout_s}
+        if options.policy == 'llm':
+            lmp.update(api=options.api)
+            if options.base_url:
+                lmp['base_url'] = options.base_url
+            if options.model:
+                lmp['model'] = options.model
+        self.graph = Graph(self.context, GraphOptions(
+            perception=options.perception, llm_backend='cassette' if options.policy == 'oracle' else 'http',
+            cassette=str(cassette) if cassette else '', camera_rate=10.0 if options.perception == 'rgbd' else 0.0,
+            extra={'lmp_node': lmp, 'sim_bridge': {'cameras': ['top']}}))
+        self.node = rclpy.create_node('cap_bench', context=self.context)
+        self.graph.executor.add_node(self.node)
+        self.execute = ActionClient(self.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
+        self.reset = self.node.create_client(ResetScene, GraphNames.SIM_RESET_SERVICE)
+        self.reset_session = self.node.create_client(Trigger, GraphNames.RESET_SESSION_SERVICE)
+        self.forget = self.node.create_client(Trigger, GraphNames.PERCEPTION_FORGET_SERVICE)
+        self.ExecuteCommand, self.ResetScene, self.Trigger = ExecuteCommand, ResetScene, Trigger
+        if not _wait(lambda: self.execute.server_is_ready() and self.reset.service_is_ready()
+                     and self.reset_session.service_is_ready() and self.forget.service_is_ready(), 60):
+            raise RuntimeError('the graph did not come up within 60 s')
+
+    def _call(self, future, timeout: float, what: str):
+        if not _wait(future.done, timeout):
+            raise TimeoutError(f'no answer from {what} within {timeout:.0f} s')
+        return future.result()
+
+    def _perceived(self, episode: Episode, tolerance: float) -> bool:
+        try:
+            source = self.graph.nodes['perception_node'].source
+            seen = {obj.name: obj for obj in source.objects()}
+        except Exception:
+            return False
+        return set(seen) == {o.name for o in episode.objects} and all(
+            np.hypot(seen[o.name].position[0] - o.xy[0], seen[o.name].position[1] - o.xy[1]) < tolerance
+            for o in episode.objects)
+
+    def run(self, episode: Episode) -> dict:
+        from geometry_msgs.msg import Point
+
+        from cap_interfaces.msg import ObjectSpec
+
+        world = self.graph.world
+        record = {'key': episode_key(episode.group, episode.template, episode.seed), 'seed': episode.seed,
+                  'group': episode.group, 'template': episode.template, 'attributes': episode.attributes,
+                  'instruction': episode.instruction, 'policy': self.options.policy,
+                  'perception': self.options.perception, 'code': '', 'success': False, 'reason': '',
+                  'sim_seconds': 0.0, 'wall_seconds': 0.0, 'model_calls': 0, 'prompt_tokens': 0,
+                  'completion_tokens': 0}
+        wall_started = time.monotonic()
+        request = self.ResetScene.Request(seed=episode.seed, objects=[
+            ObjectSpec(name=o.name, category=o.category, color_name=o.color, use_position=True,
+                       position=Point(x=o.xy[0], y=o.xy[1])) for o in episode.objects])
+        answer = self._call(self.reset.call_async(request), 60, 'the scene reset')
+        if not answer.success:
+            record['reason'] = f'scene reset failed: {answer.message}'
+            return record
+        self._call(self.forget.call_async(self.Trigger.Request()), 10, 'perception (forget)')
+        self._call(self.reset_session.call_async(self.Trigger.Request()), 10, 'lmp_node (reset session)')
+        tolerance = 0.005 if self.options.perception == 'ground_truth' else 0.02
+        if not _wait(lambda: self._perceived(episode, tolerance), 30):
+            record['reason'] = 'perception did not report the scene as reset (missing, extra or misplaced objects)'
+            return record
+        initial = {s.name: s.position for s in world.object_states()}
+        sim_started = world.time
+        goal = self._call(self.execute.send_goal_async(self.ExecuteCommand.Goal(command=episode.instruction)), 30,
+                          'lmp_node (goal)')
+        result_future = goal.get_result_async()
+        if not _wait(result_future.done, self.options.episode_timeout_s + 60):
+            goal.cancel_goal_async()
+            _wait(result_future.done, 30)
+            record['reason'] = f'no result within {self.options.episode_timeout_s:.0f} s'
+            return record
+        result = result_future.result().result
+        settle_until = world.time + SETTLE_S
+        _wait(lambda: world.time >= settle_until, 30)
+        final = {s.name: s.position for s in world.object_states()}
+        verdict = check(episode, initial, final)
+        record.update(code=result.code, success=bool(result.success and verdict.success),
+                      sim_seconds=world.time - sim_started, wall_seconds=time.monotonic() - wall_started,
+                      model_calls=result.model_calls, prompt_tokens=result.prompt_tokens,
+                      completion_tokens=result.completion_tokens,
+                      final_state={k: [round(float(v), 4) for v in p] for k, p in final.items()})
+        if not result.success:
+            record['reason'] = f'the program failed: {result.message}'
+        elif not verdict.success:
+            record['reason'] = f'the final state is wrong: {verdict.reason}'
+        return record
+
+    def close(self) -> None:
+        self.graph.close()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def _worker(index: int, keys: list[str], options: BenchOptions, cassette: str | None, results: str,
+            progress) -> None:
+    # Each worker is a graph of its own: keep it on a DDS domain of its own.
+    os.environ['ROS_DOMAIN_ID'] = str(options.first_domain_id + index)
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    runner = _EpisodeRunner(options, pathlib.Path(cassette) if cassette else None)
+    try:
+        with open(results, 'a', encoding='utf-8') as out:
+            for key in keys:
+                group, template, seed = key.split('/')
+                record = runner.run(sample_episode(group, template, int(seed)))
+                out.write(json.dumps(record) + '\n')
+                out.flush()
+                if progress is not None:
+                    progress.put(record['success'])
+    finally:
+        runner.close()
+
+
+def load_records(out_dir: pathlib.Path) -> list[dict]:
+    records = {}
+    for path in sorted(out_dir.glob('episodes*.jsonl')):
+        for line in path.read_text(encoding='utf-8').splitlines():
+            if line.strip():
+                record = json.loads(line)
+                records[record['key']] = record
+    return list(records.values())
+
+
+def run_benchmark(options: BenchOptions, show_progress: bool = True) -> dict:
+    """Run (or resume) a benchmark; return the summary written to report.json / report.md / report.png."""
+    out_dir = pathlib.Path(options.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    episodes = plan(options)
+    done = {r['key'] for r in load_records(out_dir)} if options.resume else set()
+    if not options.resume:
+        for old in out_dir.glob('episodes*.jsonl'):
+            old.unlink()
+    todo = [e for e in episodes if episode_key(e.group, e.template, e.seed) not in done]
+    cassette = None
+    if options.policy == 'oracle':
+        cassette = out_dir / 'oracle_cassette.yaml'
+        write_oracle_cassette(episodes, cassette)
+    if options.first_domain_id == 0:
+        options.first_domain_id = 1 + os.getpid() % (101 - max(1, options.jobs))
+    (out_dir / 'options.json').write_text(json.dumps(dataclasses.asdict(options), indent=2))
+    started = time.monotonic()
+    jobs = max(1, min(options.jobs, len(todo)))
+    shards = [[episode_key(e.group, e.template, e.seed) for e in todo[i::jobs]] for i in range(jobs)]
+    if todo:
+        _run_shards(shards, options, cassette, out_dir, show_progress, len(episodes), len(episodes) - len(todo))
+    records = [r for r in load_records(out_dir)
+               if r['key'] in {episode_key(e.group, e.template, e.seed) for e in episodes}]
+    title = (f"Table-top benchmark: policy {options.policy}, perception {options.perception}, "
+             f"{options.trials} trial(s) per row")
+    summary = write_report(records, out_dir, title)
+    summary['wall_seconds_this_run'] = time.monotonic() - started
+    summary['episodes'] = len(records)
+    return summary
+
+
+def _run_shards(shards, options, cassette, out_dir, show_progress, total, already) -> None:
+    context = multiprocessing.get_context('spawn')
+    progress = context.Queue()
+    processes = [context.Process(target=_worker, args=(i, keys, options, str(cassette) if cassette else None,
+                                                       str(out_dir / f'episodes-{i}.jsonl'), progress))
+                 for i, keys in enumerate(shards) if keys]
+    for process in processes:
+        process.start()
+    finished, successes = already, 0
+    bar = None
+    if show_progress:
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+        bar = Progress(TextColumn('[bold]cap bench'), BarColumn(), MofNCompleteColumn(), TextColumn('{task.fields[ok]}'),
+                       TimeRemainingColumn())
+        bar.start()
+        task = bar.add_task('episodes', total=total, completed=already, ok='')
+    try:
+        while any(p.is_alive() for p in processes) or not progress.empty():
+            try:
+                success = progress.get(timeout=0.5)
+            except Exception:  # queue.Empty: nothing finished in this half second
+                continue
+            finished += 1
+            successes += bool(success)
+            if bar is not None:
+                bar.update(task, completed=finished, ok=f'{successes}/{finished - already} succeeded')
+    finally:
+        if bar is not None:
+            bar.stop()
+        for process in processes:
+            process.join()
+    failed = [p.exitcode for p in processes if p.exitcode]
+    if failed:
+        raise RuntimeError(f'{len(failed)} benchmark worker(s) failed (exit codes {failed}); see the log above. '
+                           f'Run again with --resume to continue.')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog='cap bench tabletop', description='The paper\'s simulated table-top '
+                                     'benchmark through the cap-ros graph.')
+    parser.add_argument('--policy', choices=('oracle', 'llm'), default='oracle',
+                        help='oracle: reference programs; llm: a model at an OpenAI-compatible endpoint')
+    parser.add_argument('--groups', default=','.join(GROUPS), help='comma-separated: SA-SI, UA-SI, UA-UI')
+    parser.add_argument('--tasks', default=','.join(TEMPLATES), help='comma-separated template names')
+    parser.add_argument('--trials', type=int, default=50, help='episodes per row [50]')
+    parser.add_argument('--perception', choices=('ground_truth', 'rgbd'), default='ground_truth')
+    parser.add_argument('--seed', type=int, default=0, help='base seed: trial i uses seed base + i [0]')
+    parser.add_argument('--jobs', type=int, default=1, help='parallel graphs (processes) [1]')
+    parser.add_argument('--out', default='output/bench', help='output folder [output/bench]')
+    parser.add_argument('--resume', action='store_true', help='keep the episodes already in --out')
+    parser.add_argument('--base-url', default='', help='for --policy llm; default CAP_LLM_BASE_URL')
+    parser.add_argument('--model', default='', help='for --policy llm; default CAP_LLM_MODEL')
+    parser.add_argument('--api', choices=('chat', 'completions'), default='chat')
+    parser.add_argument('--episode-timeout', type=float, default=900.0, help='per episode [s]')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    groups = tuple(g.strip() for g in args.groups.split(',') if g.strip())
+    tasks = tuple(t.strip() for t in args.tasks.split(',') if t.strip())
+    unknown = [g for g in groups if g not in GROUPS] + [t for t in tasks if t not in TEMPLATES]
+    if unknown:
+        print(f'unknown groups or tasks: {", ".join(unknown)}; groups: {", ".join(GROUPS)}; tasks: '
+              f'{", ".join(TEMPLATES)}', file=sys.stderr)
+        return 2
+    options = BenchOptions(policy=args.policy, groups=groups, tasks=tasks, trials=args.trials,
+                           perception=args.perception, base_seed=args.seed, jobs=args.jobs, out=args.out,
+                           resume=args.resume, base_url=args.base_url, model=args.model, api=args.api,
+                           episode_timeout_s=args.episode_timeout)
+    summary = run_benchmark(options)
+    print((pathlib.Path(args.out) / 'report.md').read_text())
+    print(json.dumps({'overall_percent': summary['overall']['percent'], 'episodes': summary['episodes'],
+                      'wall_seconds': round(summary['wall_seconds_this_run'], 1), 'out': args.out}))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
