@@ -8,6 +8,9 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    # The MJCF models are loaded relative to the module, so they travel with the Python package.
+    package_data={package_name: ['models/*.xml']},
+    include_package_data=True,
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -22,6 +25,8 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'sim_bridge = cap_sim_bridge.bridge_node:main',
+            'cap_sim_render = cap_sim_bridge.render_cli:main',
         ],
     },
 )

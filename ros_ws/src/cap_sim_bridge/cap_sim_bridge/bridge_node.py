@@ -1,0 +1,368 @@
+"""sim_bridge: the MuJoCo table-top world on ROS 2, standing in for the robot driver and the cameras.
+
+Publishes /clock (simulated time), /joint_states, the ground-truth object array, and per camera
+<CAMERA_NAMESPACE>/<camera>/{color, depth, camera_info, pose}; serves the scene reset, a FollowJointTrajectory
+action and a GripperCommand action. Like a robot driver it does not listen to /cap/stop: the motion owners
+(cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it stopped. The physics runs in a thread of its own (never on an executor thread); the
+callbacks, which may block while a motion runs, need a MultiThreadedExecutor with a few threads (main() uses 8).
+
+QoS, chosen on purpose:
+- /clock, /joint_states: reliable, keep last 10 (the defaults robot_state_publisher and sim-time users expect;
+  a reliable publisher also serves best-effort subscribers);
+- images, depth, camera_info: reliable, keep last 1: any subscriber (default or sensor-data QoS) receives them,
+  and keep-last 1 hands a slow subscriber the newest frame instead of a backlog;
+- ground-truth objects and camera poses: reliable, transient local, keep last 1: a node that starts later gets
+  the current scene and the camera extrinsics at once.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from geometry_msgs.msg import PoseStamped
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from trajectory_msgs.msg import JointTrajectoryPoint
+
+from cap_interfaces.action import FollowJointTrajectory, GripperCommand
+from cap_interfaces.msg import GraphNames, ObjectArray
+from cap_interfaces.srv import ResetScene
+from cap_sim_bridge import ros_conversions as conv
+from cap_sim_bridge import trajectory_goal
+from cap_sim_bridge.pacing import Pacer
+from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge.world import ARM_JOINT_NAMES, CAMERA_NAMES, GRIPPER_JOINT_NAMES, TabletopWorld
+
+STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+IMAGE_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+GRIPPER_POSITION_TOLERANCE = 0.002  # [m] opening counted as reached
+GRIPPER_SETTLE_TIME = 0.1  # [s] of simulated time the fingers must be still before a gripper goal ends
+POLL_PERIOD = 0.005  # [s] wall time between checks of a running action
+# Faster than real time, rates in simulated time would mean thousands of messages per wall second; these caps
+# keep the publishing cost bounded (a skipped /clock or /joint_states message is superseded by the next anyway).
+MAX_WALL_STATE_RATE = 500.0  # [Hz] /clock and /joint_states
+MAX_WALL_OBJECTS_RATE = 50.0  # [Hz] ground-truth objects
+FEEDBACK_PERIOD = 0.05  # [s] wall time between feedback messages
+
+
+def camera_topic(camera: str, kind: str) -> str:
+    return f'{GraphNames.CAMERA_NAMESPACE}/{camera}/{kind}'
+
+
+class SimBridgeNode(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__('sim_bridge', **kwargs)
+        scene_name = self._parameter('scene', 'tabletop', 'Scene loaded at start and by resets with no scene name.')
+        seed = self._parameter('seed', 0, 'Seed of the scene loaded at start.')
+        objects = self._parameter('objects', '', 'Objects of the scene loaded at start, comma-separated names '
+                                  '("red block, blue bowl"); empty = the default episode of the seed.')
+        real_time = self._parameter('real_time', True, 'true: simulated time follows the wall clock (times '
+                                    'real_time_factor); false: simulate as fast as possible.')
+        self._real_time_factor = self._parameter('real_time_factor', 1.0, 'Simulated seconds per wall second '
+                                                 'when real_time is true.') if real_time else 0.0
+        self._state_rate = self._parameter('state_rate', 100.0, 'Rate of /clock and /joint_states [Hz of '
+                                           'simulated time].')
+        self._objects_rate = self._parameter('objects_rate', 10.0, 'Rate of the ground-truth object array '
+                                             '[Hz of simulated time].')
+        self._camera_rate = self._parameter('camera_rate', 10.0, 'Rate of camera images [Hz of simulated time]; '
+                                            '0 = no images.')
+        self._cameras = self._parameter('cameras', list(CAMERA_NAMES), 'Cameras to publish.')
+        self._image_width = self._parameter('image_width', 640, 'Width of the published images [pixels].')
+        self._image_height = self._parameter('image_height', 480, 'Height of the published images [pixels].')
+        self._publish_depth = self._parameter('publish_depth', True, 'Publish depth images (32FC1, metres).')
+        self._goal_tolerance = self._parameter('goal_tolerance', trajectory_goal.DEFAULT_GOAL_TOLERANCE,
+                                               'Default per-joint goal tolerance of trajectories [rad].')
+        self._goal_time_tolerance = self._parameter('goal_time_tolerance',
+                                                    trajectory_goal.DEFAULT_GOAL_TIME_TOLERANCE,
+                                                    'Default time after a trajectory\'s end to meet the goal '
+                                                    'tolerance [s].')
+        self._gripper_timeout = self._parameter('gripper_timeout', 5.0, 'Longest gripper motion [s of simulated '
+                                                'time].')
+        unknown = [c for c in self._cameras if c not in CAMERA_NAMES]
+        if unknown:
+            raise ValueError(f'unknown cameras {unknown}; the scene has {list(CAMERA_NAMES)}')
+
+        names = [n for n in (part.strip() for part in objects.split(',')) if n]
+        self.world = TabletopWorld(scene_name, seed, [ObjectSpec.from_name(n) for n in names] or None)
+
+        self._clock_pub = self.create_publisher(Clock, GraphNames.CLOCK_TOPIC, STATE_QOS)
+        self._joint_pub = self.create_publisher(JointState, GraphNames.JOINT_STATES_TOPIC, STATE_QOS)
+        self._objects_pub = self.create_publisher(ObjectArray, GraphNames.SIM_OBJECTS_TOPIC, LATCHED_QOS)
+        self._camera_pubs = {
+            camera: {
+                'color': self.create_publisher(Image, camera_topic(camera, 'color'), IMAGE_QOS),
+                'depth': self.create_publisher(Image, camera_topic(camera, 'depth'), IMAGE_QOS),
+                'camera_info': self.create_publisher(CameraInfo, camera_topic(camera, 'camera_info'), IMAGE_QOS),
+                'pose': self.create_publisher(PoseStamped, camera_topic(camera, 'pose'), LATCHED_QOS),
+            } for camera in self._cameras}
+
+        callbacks = ReentrantCallbackGroup()
+        self.create_service(ResetScene, GraphNames.SIM_RESET_SERVICE, self._on_reset, callback_group=callbacks)
+        self._trajectory_server = ActionServer(
+            self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION, self._execute_trajectory,
+            goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
+            callback_group=callbacks)
+        self._gripper_server = ActionServer(
+            self, GripperCommand, GraphNames.SIM_GRIPPER_ACTION, self._execute_gripper,
+            goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
+            callback_group=callbacks)
+
+        self._publish_scene()
+        self._stop = threading.Event()
+        self._scene_reset = threading.Event()
+        self._physics = threading.Thread(target=self._run_physics, name='sim_physics', daemon=True)
+        self._physics.start()
+        mode = f'{self._real_time_factor:g}x real time' if self._real_time_factor > 0 else 'as fast as possible'
+        self.get_logger().info(f'simulating scene "{scene_name}" seed {seed} {mode}; cameras {self._cameras}')
+
+    def _parameter(self, name: str, default, description: str):
+        return self.declare_parameter(name, default, ParameterDescriptor(description=description)).value
+
+    def destroy_node(self) -> None:
+        self._stop.set()
+        self._physics.join(timeout=10.0)
+        self._trajectory_server.destroy()
+        self._gripper_server.destroy()
+        super().destroy_node()
+
+    # ------------------------------------------------------------------------------------------- physics
+    def _run_physics(self) -> None:
+        world = self.world
+        steps_per_tick = max(1, int(round(1.0 / (self._state_rate * world.timestep))))
+        pacer = Pacer(self._real_time_factor)
+        next_objects = next_camera = world.time
+        last_state_wall = last_objects_wall = -math.inf
+        try:
+            while not self._stop.is_set():
+                wall = time.monotonic()
+                publish_state = wall - last_state_wall >= 1.0 / MAX_WALL_STATE_RATE
+                with world.lock:
+                    world.step(steps_per_tick)
+                    now = world.time
+                    joints = conv.joint_state_msg(
+                        now, ARM_JOINT_NAMES + GRIPPER_JOINT_NAMES,
+                        np.concatenate([world.joint_positions(), world.finger_positions()]),
+                        np.concatenate([world.joint_velocities(), world.finger_velocities()]),
+                        np.concatenate([world.joint_efforts(), np.zeros(2)])) if publish_state else None
+                    objects = world.object_states() if now >= next_objects and \
+                        wall - last_objects_wall >= 1.0 / MAX_WALL_OBJECTS_RATE else None
+                if joints is not None:
+                    self._clock_pub.publish(Clock(clock=conv.time_msg(now)))
+                    self._joint_pub.publish(joints)
+                    last_state_wall = wall
+                if objects is not None:
+                    self._objects_pub.publish(ObjectArray(header=conv.header(now),
+                                                          objects=[conv.object_state_msg(s) for s in objects]))
+                    next_objects = max(next_objects + 1.0 / self._objects_rate, now)
+                    last_objects_wall = wall
+                if self._camera_rate > 0 and self._cameras and now >= next_camera:
+                    self._publish_images(now)
+                    next_camera = max(next_camera + 1.0 / self._camera_rate, now)
+                if self._scene_reset.is_set():
+                    # A reset simulates the settling at once: pace from here rather than wait for the wall clock.
+                    self._scene_reset.clear()
+                    pacer.restart()
+                delay = pacer.delay(now)
+                if delay > 0:
+                    self._stop.wait(delay)
+                else:
+                    time.sleep(0)  # let callbacks waiting for world.lock in
+        except Exception as error:  # noqa: BLE001 - a dead physics thread must say why
+            if self.context.ok() and not self._stop.is_set():
+                self.get_logger().fatal(f'physics loop stopped: {error!r}')
+                raise
+            # Otherwise the process is shutting down (e.g. SIGTERM) and publishing failed: nothing to report.
+        finally:
+            world.close()
+
+    def _publish_images(self, now: float) -> None:
+        width, height = self._image_width, self._image_height
+        for camera in self._cameras:
+            rgb, depth = self.world.render(camera, width, height, with_depth=self._publish_depth)
+            publishers = self._camera_pubs[camera]
+            publishers['color'].publish(conv.color_image_msg(now, camera, rgb))
+            if depth is not None:
+                publishers['depth'].publish(conv.depth_image_msg(now, camera, depth))
+            publishers['camera_info'].publish(
+                conv.camera_info_msg(now, camera, self.world.camera_intrinsics(camera, width, height)))
+
+    def _publish_scene(self) -> None:
+        """Ground truth and camera poses now (after start and after every reset)."""
+        with self.world.lock:
+            now = self.world.time
+            states = self.world.object_states()
+            poses = {camera: self.world.camera_pose(camera) for camera in self._cameras}
+        self._objects_pub.publish(ObjectArray(header=conv.header(now),
+                                              objects=[conv.object_state_msg(s) for s in states]))
+        for camera, pose in poses.items():
+            self._camera_pubs[camera]['pose'].publish(conv.pose_stamped_msg(now, pose))
+
+    # --------------------------------------------------------------------------------------------- reset
+    def _on_reset(self, request: ResetScene.Request, response: ResetScene.Response) -> ResetScene.Response:
+        try:
+            if request.scene and request.scene != self.world.scene_name:
+                raise ValueError(f'unknown scene {request.scene!r}; this bridge simulates '
+                                 f'"{self.world.scene_name}"')
+            specs = [conv.object_spec(o) for o in request.objects]
+            states = self.world.reset(request.seed, specs or None)
+            self._scene_reset.set()
+        except ValueError as error:
+            response.success = False
+            response.message = str(error)
+            return response
+        self._publish_scene()
+        response.success = True
+        response.message = f'scene "{self.world.scene_name}" seed {request.seed}: ' + \
+            ', '.join(s.name for s in states)
+        response.objects = [conv.object_state_msg(s) for s in states]
+        return response
+
+    # ---------------------------------------------------------------------------------------- trajectory
+    def _execute_trajectory(self, goal_handle) -> FollowJointTrajectory.Result:
+        world = self.world
+        result = FollowJointTrajectory.Result()
+        with world.lock:
+            try:
+                plan = trajectory_goal.plan_from_goal(goal_handle.request, ARM_JOINT_NAMES, world.reference()[0],
+                                                      self._goal_tolerance, self._goal_time_tolerance)
+                end_time = world.follow_trajectory(plan.times, plan.positions, plan.velocities)
+            except trajectory_goal.GoalError as error:
+                return self._abort(goal_handle, result, error.code, str(error))
+            except ValueError as error:
+                return self._abort(goal_handle, result, trajectory_goal.INVALID_GOAL, str(error))
+            serial = world.arm_command_serial
+            start_time = world.time
+        last_feedback = 0.0
+        while True:
+            if goal_handle.is_cancel_requested:
+                with world.lock:
+                    if world.arm_command_serial == serial:
+                        world.hold()
+                goal_handle.canceled()
+                result.error_string = 'cancelled: the arm holds where it stopped'
+                return result
+            with world.lock:
+                replaced = world.arm_command_serial != serial
+                now = world.time
+                positions, velocities = world.joint_positions(), world.joint_velocities()
+                desired, desired_velocities = world.reference()
+            if replaced:
+                return self._abort(goal_handle, result, trajectory_goal.INVALID_GOAL,
+                                   'replaced by a newer trajectory, a hold or a scene reset')
+            if self._stop.is_set():
+                return self._abort(goal_handle, result, trajectory_goal.INVALID_GOAL, 'the simulation stopped')
+            if time.monotonic() - last_feedback >= FEEDBACK_PERIOD:
+                last_feedback = time.monotonic()
+                goal_handle.publish_feedback(self._trajectory_feedback(now, now - start_time, desired,
+                                                                       desired_velocities, positions, velocities))
+            violation = plan.path_violation(positions, desired, ARM_JOINT_NAMES) if now < end_time else None
+            if violation:
+                world.hold()
+                return self._abort(goal_handle, result, trajectory_goal.PATH_TOLERANCE_VIOLATED, violation)
+            if now >= end_time:
+                if plan.goal_reached(positions, velocities):
+                    goal_handle.succeed()
+                    result.error_code = trajectory_goal.SUCCESSFUL
+                    return result
+                if now > end_time + plan.goal_time_tolerance:
+                    return self._abort(goal_handle, result, trajectory_goal.GOAL_TOLERANCE_VIOLATED,
+                                       'goal not reached in time: ' + plan.goal_errors(positions, ARM_JOINT_NAMES))
+            time.sleep(POLL_PERIOD)
+
+    @staticmethod
+    def _abort(goal_handle, result, code: int, message: str):
+        goal_handle.abort()
+        result.error_code = code
+        result.error_string = message
+        return result
+
+    @staticmethod
+    def _trajectory_feedback(now, elapsed, desired, desired_velocities, positions, velocities):
+        duration = conv.duration_msg(elapsed)
+        feedback = FollowJointTrajectory.Feedback(header=conv.header(now), joint_names=list(ARM_JOINT_NAMES))
+        feedback.desired = JointTrajectoryPoint(positions=desired.tolist(), velocities=desired_velocities.tolist(),
+                                                time_from_start=duration)
+        feedback.actual = JointTrajectoryPoint(positions=positions.tolist(), velocities=velocities.tolist(),
+                                               time_from_start=duration)
+        feedback.error = JointTrajectoryPoint(positions=(desired - positions).tolist(),
+                                              velocities=(desired_velocities - velocities).tolist(),
+                                              time_from_start=duration)
+        return feedback
+
+    # ------------------------------------------------------------------------------------------- gripper
+    def _execute_gripper(self, goal_handle) -> GripperCommand.Result:
+        world = self.world
+        request = goal_handle.request
+        with world.lock:
+            world.command_gripper(request.position, request.max_effort)
+            target = world.gripper_state().target_opening
+            deadline = world.time + self._gripper_timeout
+        still_since = None
+        last_feedback = 0.0
+        while True:
+            with world.lock:
+                state = world.gripper_state()
+                now = world.time
+            reached = abs(state.opening - state.target_opening) <= GRIPPER_POSITION_TOLERANCE
+            outcome = GripperCommand.Result(position=state.opening, effort=state.force, stalled=False,
+                                            reached_goal=reached)
+            if goal_handle.is_cancel_requested:
+                # The fingers stay where they are, keeping whatever grip they have.
+                world.command_gripper(state.opening, state.max_force)
+                goal_handle.canceled()
+                return outcome
+            if state.target_opening != target or self._stop.is_set():
+                goal_handle.abort()
+                return outcome
+            if time.monotonic() - last_feedback >= FEEDBACK_PERIOD:
+                last_feedback = time.monotonic()
+                goal_handle.publish_feedback(GripperCommand.Feedback(position=state.opening, effort=state.force,
+                                                                     stalled=False, reached_goal=reached))
+            still = not state.reference_moving and state.speed < 2e-3
+            still_since = (still_since if still_since is not None else now) if still else None
+            if still_since is not None and now - still_since >= GRIPPER_SETTLE_TIME:
+                # Stopped short of the commanded opening: the fingers hold an object (a grasp, not a failure).
+                outcome.stalled = not reached
+                goal_handle.succeed()
+                return outcome
+            if now > deadline:
+                goal_handle.abort()
+                return outcome
+            time.sleep(POLL_PERIOD)
+
+
+def main(args=None) -> None:
+    rclpy.init(args=args)
+    # Action goals block their thread while the motion runs: keep threads free for services and cancels.
+    executor = MultiThreadedExecutor(num_threads=8)
+    node = None
+    try:
+        node = SimBridgeNode()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:
+        # A SIGTERM or SIGINT while starting up shuts the context down under our feet: that is a normal exit.
+        if rclpy.ok():
+            raise
+    finally:
+        if node is not None:
+            node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

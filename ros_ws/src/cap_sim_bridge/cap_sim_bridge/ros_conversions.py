@@ -1,0 +1,101 @@
+"""Conversions between the world's plain data and ROS messages (message types only, no rclpy)."""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+from builtin_interfaces.msg import Duration, Time
+from geometry_msgs.msg import Point, PoseStamped, Quaternion
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import ColorRGBA, Header
+
+from cap_interfaces.msg import ObjectSpec as ObjectSpecMsg
+from cap_interfaces.msg import ObjectState as ObjectStateMsg
+from cap_sim_bridge.camera import CameraIntrinsics
+from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge.world import ObjectState
+
+WORLD_FRAME = 'world'
+
+
+def optical_frame_id(camera: str) -> str:
+    return f'{camera}_optical_frame'
+
+
+def time_msg(seconds: float) -> Time:
+    nanoseconds = int(round(seconds * 1e9))
+    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+
+def duration_msg(seconds: float) -> Duration:
+    stamp = time_msg(seconds)
+    return Duration(sec=stamp.sec, nanosec=stamp.nanosec)
+
+
+def duration_seconds(duration: Duration) -> float:
+    return duration.sec + duration.nanosec * 1e-9
+
+
+def header(seconds: float, frame_id: str = WORLD_FRAME) -> Header:
+    return Header(stamp=time_msg(seconds), frame_id=frame_id)
+
+
+def object_state_msg(state: ObjectState) -> ObjectStateMsg:
+    return ObjectStateMsg(
+        name=state.name, category=state.category, color_name=state.color_name,
+        color=ColorRGBA(r=state.rgba[0], g=state.rgba[1], b=state.rgba[2], a=state.rgba[3]),
+        position=Point(x=state.position[0], y=state.position[1], z=state.position[2]),
+        orientation=Quaternion(x=state.orientation_xyzw[0], y=state.orientation_xyzw[1],
+                               z=state.orientation_xyzw[2], w=state.orientation_xyzw[3]),
+        bbox_min=Point(x=state.bbox_min[0], y=state.bbox_min[1], z=state.bbox_min[2]),
+        bbox_max=Point(x=state.bbox_max[0], y=state.bbox_max[1], z=state.bbox_max[2]),
+        visible=True)
+
+
+def object_spec(msg: ObjectSpecMsg) -> ObjectSpec:
+    """A reset request's object; a missing category or colour is read from the name ("red block"), a missing
+    name is made of them."""
+    name = msg.name.strip().lower() or f'{msg.color_name} {msg.category}'
+    from_name = ObjectSpec.from_name(name)
+    return ObjectSpec(name=name, category=msg.category or from_name.category,
+                      color_name=msg.color_name or from_name.color_name,
+                      position=(msg.position.x, msg.position.y) if msg.use_position else None)
+
+
+def joint_state_msg(seconds: float, names: Sequence[str], positions: np.ndarray, velocities: np.ndarray,
+                    efforts: np.ndarray) -> JointState:
+    return JointState(header=header(seconds, ''), name=list(names), position=positions.tolist(),
+                      velocity=velocities.tolist(), effort=efforts.tolist())
+
+
+def color_image_msg(seconds: float, camera: str, rgb: np.ndarray) -> Image:
+    height, width, _ = rgb.shape
+    return Image(header=header(seconds, optical_frame_id(camera)), height=height, width=width, encoding='rgb8',
+                 is_bigendian=0, step=width * 3, data=np.ascontiguousarray(rgb).tobytes())
+
+
+def depth_image_msg(seconds: float, camera: str, depth: np.ndarray) -> Image:
+    """32FC1 depth in metres along the optical axis (REP 118)."""
+    height, width = depth.shape
+    depth = np.ascontiguousarray(depth, dtype='<f4')
+    return Image(header=header(seconds, optical_frame_id(camera)), height=height, width=width, encoding='32FC1',
+                 is_bigendian=0, step=width * 4, data=depth.tobytes())
+
+
+def camera_info_msg(seconds: float, camera: str, intrinsics: CameraIntrinsics) -> CameraInfo:
+    k = intrinsics
+    return CameraInfo(header=header(seconds, optical_frame_id(camera)), height=k.height, width=k.width,
+                      distortion_model='plumb_bob', d=[0.0] * 5,
+                      k=[k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
+                      r=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                      p=[k.fx, 0.0, k.cx, 0.0, 0.0, k.fy, k.cy, 0.0, 0.0, 0.0, 1.0, 0.0])
+
+
+def pose_stamped_msg(seconds: float, pose: np.ndarray) -> PoseStamped:
+    """A 4x4 world_T_frame as a PoseStamped in the world frame."""
+    x, y, z, w = Rotation.from_matrix(pose[:3, :3]).as_quat()
+    msg = PoseStamped(header=header(seconds))
+    msg.pose.position = Point(x=float(pose[0, 3]), y=float(pose[1, 3]), z=float(pose[2, 3]))
+    msg.pose.orientation = Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))
+    return msg

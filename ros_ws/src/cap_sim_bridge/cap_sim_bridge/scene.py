@@ -1,0 +1,197 @@
+"""The table-top scene: its facts (table, colours, object sizes, spawn rules) and how a MuJoCo model is built from it.
+
+The robot, table and cameras come from the MJCF files in ``models/``; blocks and bowls are added here with
+MjSpec, one free body per object, named exactly as the object ("red block", "blue bowl").
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import pathlib
+from typing import Iterable, Sequence
+
+import mujoco
+import numpy as np
+
+MODELS_DIR = pathlib.Path(__file__).resolve().parent / 'models'
+SCENE_FILES = {'tabletop': MODELS_DIR / 'tabletop.xml'}
+DEFAULT_SCENE = 'tabletop'
+
+# Table-top surface (z = 0) and spawn rules, world frame [m] (BENCHMARK.md).
+TABLE_X = (-0.3, 0.3)
+TABLE_Y = (-0.8, -0.2)
+SPAWN_X = (-0.2, 0.2)
+SPAWN_Y = (-0.7, -0.3)
+MIN_SEPARATION = 0.15
+
+# The ten colours of the benchmark, RGB 0-255.
+COLORS: dict[str, tuple[int, int, int]] = {
+    'blue': (78, 121, 167),
+    'red': (255, 87, 89),
+    'green': (89, 169, 79),
+    'orange': (242, 142, 43),
+    'yellow': (237, 201, 72),
+    'purple': (176, 122, 161),
+    'pink': (255, 157, 167),
+    'cyan': (118, 183, 178),
+    'brown': (156, 117, 95),
+    'gray': (186, 176, 172),
+}
+CATEGORY_BLOCK = 'block'
+CATEGORY_BOWL = 'bowl'
+CATEGORIES = (CATEGORY_BLOCK, CATEGORY_BOWL)
+
+BLOCK_SIZE = 0.04  # edge of the cube [m]
+BLOCK_MASS = 0.01  # [kg]
+# Bowl: a flat disc bottom and a ring of outward-tilted wall slabs; about 13 cm across the rim, 4 cm deep.
+BOWL_BOTTOM_RADIUS = 0.05
+BOWL_BOTTOM_THICKNESS = 0.006
+BOWL_WALL_HEIGHT = 0.034
+BOWL_WALL_TILT = math.radians(25.0)
+BOWL_WALL_THICKNESS = 0.004
+BOWL_WALL_SEGMENTS = 12
+BOWL_MASS = 0.15  # [kg]; heavy enough that a dropped block does not tip it
+BOWL_RIM_RADIUS = (BOWL_BOTTOM_RADIUS + BOWL_WALL_HEIGHT * math.tan(BOWL_WALL_TILT) + BOWL_WALL_THICKNESS)
+# Inside a bowl: horizontal distance from its centre at which a block still rests on the bottom.
+BOWL_INNER_RADIUS = BOWL_BOTTOM_RADIUS
+
+# Objects start this far above their resting height so that no contact starts in penetration.
+SPAWN_CLEARANCE = 0.002
+
+# Contact groups (see models/ur5e_gripper.xml): objects and the table collide with everything.
+_OBJECT_CONTYPE = 1
+_OBJECT_CONAFFINITY = 3
+
+
+@dataclasses.dataclass(frozen=True)
+class ObjectSpec:
+    """One object to place on reset. position: (x, y) on the table [m]; None = sampled from the seed."""
+
+    name: str
+    category: str
+    color_name: str
+    position: tuple[float, float] | None = None
+
+    @classmethod
+    def from_name(cls, name: str, position: tuple[float, float] | None = None) -> 'ObjectSpec':
+        """'red block' -> ObjectSpec('red block', 'block', 'red')."""
+        color_name, _, category = name.strip().lower().partition(' ')
+        return cls(f'{color_name} {category}', category, color_name, position)
+
+    def validate(self) -> None:
+        if self.category not in CATEGORIES:
+            raise ValueError(f'unknown category {self.category!r} of {self.name!r}; known: {", ".join(CATEGORIES)}')
+        if self.color_name not in COLORS:
+            raise ValueError(f'unknown colour {self.color_name!r} of {self.name!r}; known: {", ".join(COLORS)}')
+        if not self.name:
+            raise ValueError('an object needs a name')
+
+
+def rgba(color_name: str) -> tuple[float, float, float, float]:
+    """The palette colour as RGBA in [0, 1]."""
+    r, g, b = COLORS[color_name]
+    return (r / 255.0, g / 255.0, b / 255.0, 1.0)
+
+
+def resting_height(category: str) -> float:
+    """z of the object's body origin when it rests on the table: cube centre, bowl bottom."""
+    return BLOCK_SIZE / 2 if category == CATEGORY_BLOCK else 0.0
+
+
+def default_objects(seed: int) -> list[ObjectSpec]:
+    """The scene's default episode for a seed: 3-4 blocks and 3-4 bowls of distinct colours (per category)."""
+    rng = np.random.default_rng([seed, 1])
+    names = list(COLORS)
+    specs = []
+    for category in (CATEGORY_BLOCK, CATEGORY_BOWL):
+        count = int(rng.integers(3, 5))
+        for color_name in rng.choice(names, size=count, replace=False):
+            specs.append(ObjectSpec(f'{color_name} {category}', category, str(color_name)))
+    return specs
+
+
+def sample_spawn_positions(specs: Sequence[ObjectSpec], seed: int, x_range: tuple[float, float] = SPAWN_X,
+                           y_range: tuple[float, float] = SPAWN_Y, min_separation: float = MIN_SEPARATION,
+                           max_restarts: int = 200) -> list[tuple[float, float]]:
+    """xy for every spec: given ones kept, the others drawn uniformly in the spawn region, pairwise apart.
+
+    Sequential rejection sampling; when an object finds no place (the region is nearly full) the whole draw
+    restarts, so a feasible layout is found for any seed the rules allow. Raises ValueError when none is found.
+    """
+    rng = np.random.default_rng([seed, 2])
+    fixed = [(i, spec.position) for i, spec in enumerate(specs) if spec.position is not None]
+    free = [i for i, spec in enumerate(specs) if spec.position is None]
+    for _ in range(max_restarts):
+        placed: dict[int, tuple[float, float]] = {i: (float(p[0]), float(p[1])) for i, p in fixed}
+        for i in free:
+            for _ in range(100):
+                candidate = (float(rng.uniform(*x_range)), float(rng.uniform(*y_range)))
+                if all(math.dist(candidate, other) >= min_separation for other in placed.values()):
+                    placed[i] = candidate
+                    break
+            else:
+                break
+        if len(placed) == len(specs):
+            return [placed[i] for i in range(len(specs))]
+    raise ValueError(f'no layout of {len(specs)} objects at least {min_separation} m apart fits the spawn region')
+
+
+def build_model(objects: Iterable[ObjectSpec], scene: str = DEFAULT_SCENE) -> mujoco.MjModel:
+    """Compile the scene with one free body per object (body and free joint named after the object)."""
+    if scene not in SCENE_FILES:
+        raise ValueError(f'unknown scene {scene!r}; known: {", ".join(SCENE_FILES)}')
+    spec = mujoco.MjSpec.from_file(str(SCENE_FILES[scene]))
+    for obj in objects:
+        obj.validate()
+        body = spec.worldbody.add_body(name=obj.name, pos=[0.0, 0.0, resting_height(obj.category)])
+        body.add_freejoint(name=obj.name)
+        if obj.category == CATEGORY_BLOCK:
+            _add_block_geoms(body, obj)
+        else:
+            _add_bowl_geoms(body, obj)
+    return spec.compile()
+
+
+def _object_geom(body: mujoco.MjsBody, obj: ObjectSpec, **kwargs) -> mujoco.MjsGeom:
+    geom = body.add_geom(contype=_OBJECT_CONTYPE, conaffinity=_OBJECT_CONAFFINITY, rgba=rgba(obj.color_name),
+                         friction=[0.9, 0.005, 0.0001], **kwargs)
+    return geom
+
+
+def _add_block_geoms(body: mujoco.MjsBody, obj: ObjectSpec) -> None:
+    half = BLOCK_SIZE / 2
+    _object_geom(body, obj, name=obj.name, type=mujoco.mjtGeom.mjGEOM_BOX, size=[half, half, half],
+                 mass=BLOCK_MASS)
+
+
+def _add_bowl_geoms(body: mujoco.MjsBody, obj: ObjectSpec) -> None:
+    # Mass split between the bottom (most, keeps the centre of mass low) and the walls.
+    wall_mass = 0.3 * BOWL_MASS / BOWL_WALL_SEGMENTS
+    half_bottom = BOWL_BOTTOM_THICKNESS / 2
+    _object_geom(body, obj, name=f'{obj.name} bottom', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                 size=[BOWL_BOTTOM_RADIUS, half_bottom, 0.0], pos=[0.0, 0.0, half_bottom], mass=0.7 * BOWL_MASS)
+    slant_half_length = BOWL_WALL_HEIGHT / 2 / math.cos(BOWL_WALL_TILT)
+    centre_radius = (BOWL_BOTTOM_RADIUS + BOWL_WALL_THICKNESS / 2 + BOWL_WALL_HEIGHT / 2 * math.tan(BOWL_WALL_TILT))
+    # Slabs a little wider than the chord they cover, so neighbours overlap and leave no gap.
+    half_width = 1.15 * centre_radius * math.tan(math.pi / BOWL_WALL_SEGMENTS)
+    for k in range(BOWL_WALL_SEGMENTS):
+        azimuth = 2 * math.pi * k / BOWL_WALL_SEGMENTS
+        # Slab frame: x tangential, y radial (outward), z along the wall; tilted outward about x.
+        rotation = _rot_z(azimuth - math.pi / 2) @ _rot_x(-BOWL_WALL_TILT)
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, rotation.flatten())
+        pos = [centre_radius * math.cos(azimuth), centre_radius * math.sin(azimuth),
+               BOWL_BOTTOM_THICKNESS + BOWL_WALL_HEIGHT / 2]
+        _object_geom(body, obj, name=f'{obj.name} wall {k}', type=mujoco.mjtGeom.mjGEOM_BOX,
+                     size=[half_width, BOWL_WALL_THICKNESS / 2, slant_half_length], pos=pos, quat=quat,
+                     mass=wall_mass)
+
+
+def _rot_x(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _rot_z(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

@@ -1,0 +1,459 @@
+"""The simulated table-top world: a UR5e with a parallel-jaw gripper, a table, blocks and bowls (no ROS here).
+
+Typical use::
+
+    world = TabletopWorld()
+    objects = world.reset(seed=3)                       # list[ObjectState] after the objects settled
+    world.follow_trajectory([1.0, 2.0], [q_mid, q_goal])  # times from now [s], arm joint positions [rad]
+    world.run_for(2.5)                                  # advance simulated time
+    world.command_gripper(opening=0.0, max_force=20.0)  # close with 20 N per finger
+    rgb, depth = world.render('front', 640, 480)
+
+Threading rule: every public method takes ``world.lock`` (a re-entrant lock) for as long as it touches the
+simulation, so one thread may step the physics while others command and read the world. Hold ``world.lock``
+yourself to make several calls atomic (e.g. read the state and command a trajectory at one instant).
+Rendering owns an OpenGL context per calling thread; render from one thread (the physics thread in the node).
+
+Simulated time (``world.time``) never goes backwards, not even on reset; trajectory times are relative to the
+moment the trajectory is commanded. The same seed and object list always give the same initial state.
+"""
+from __future__ import annotations
+
+import dataclasses
+import threading
+from typing import Sequence
+
+import mujoco
+import numpy as np
+
+from cap_sim_bridge import camera as camera_math
+from cap_sim_bridge import scene
+from cap_sim_bridge.rendering import RgbdRenderer
+from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge.trajectory import JointTrajectory
+
+ARM_JOINT_NAMES = ('shoulder_pan_joint', 'shoulder_lift_joint', 'elbow_joint', 'wrist_1_joint', 'wrist_2_joint',
+                   'wrist_3_joint')
+GRIPPER_JOINT_NAMES = ('gripper_left_finger_joint', 'gripper_right_finger_joint')
+GRIPPER_ACTUATOR = 'gripper'
+GRIPPER_TENDON = 'gripper_opening'
+CAMERA_NAMES = ('front', 'top')
+TCP_SITE = 'tcp'
+FLANGE_SITE = 'flange'
+TCP_OFFSET = 0.15  # tcp distance along the flange's +z [m]
+
+# Arm pose at reset: the tcp points straight down at (0, -0.2, 0.45), above the table's top edge, out of the
+# top camera's view of the table.
+HOME_JOINT_POSITIONS = np.array([0.8413, -2.2842, 1.7017, -0.9883, -1.5708, -0.7295])
+
+GRIPPER_MAX_OPENING = 0.085  # [m], pad to pad
+GRIPPER_DEFAULT_FORCE = 20.0  # [N] per finger
+GRIPPER_MAX_FORCE = 100.0
+GRIPPER_SPEED = 0.1  # [m/s] rate at which the commanded opening moves, like a real gripper's finger speed
+
+DEFAULT_SETTLE_TIME = 0.5  # [s] of simulated time for objects to come to rest after reset
+
+
+@dataclasses.dataclass(frozen=True)
+class ObjectState:
+    """Ground truth of one object [world frame, m]. position = centre of the axis-aligned bounding box."""
+
+    name: str
+    category: str
+    color_name: str
+    rgba: tuple[float, float, float, float]
+    position: tuple[float, float, float]
+    orientation_xyzw: tuple[float, float, float, float]
+    bbox_min: tuple[float, float, float]
+    bbox_max: tuple[float, float, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class GripperState:
+    """opening between the pads [m]; force: squeeze per finger [N] (positive when closing); speed [m/s]."""
+
+    opening: float
+    force: float
+    speed: float
+    target_opening: float
+    max_force: float
+    # True while the commanded opening still ramps toward the target at GRIPPER_SPEED.
+    reference_moving: bool
+
+
+class TabletopWorld:
+    """The table-top simulation. See the module docstring for the threading rule."""
+
+    def __init__(self, scene_name: str = scene.DEFAULT_SCENE, seed: int = 0,
+                 objects: Sequence[ObjectSpec | str] | None = None) -> None:
+        self.lock = threading.RLock()
+        self.scene_name = scene_name
+        self._models: dict[tuple, mujoco.MjModel] = {}
+        self._renderers: dict[tuple[int, int, int, str], RgbdRenderer] = {}
+        self.model: mujoco.MjModel | None = None
+        self.data: mujoco.MjData | None = None
+        self.objects: list[ObjectSpec] = []
+        self.seed = seed
+        self._arm_command_serial = 0
+        self.reset(seed, objects)
+
+    # ----------------------------------------------------------------------------------------------- reset
+    def reset(self, seed: int, objects: Sequence[ObjectSpec | str] | None = None,
+              settle_time: float = DEFAULT_SETTLE_TIME) -> list[ObjectState]:
+        """Place the objects (default: the scene's episode for this seed) and let them settle.
+
+        objects: ObjectSpec or names like "red block"; specs without a position get one sampled from the seed
+        under the spawn rules. The arm goes to HOME_JOINT_POSITIONS with the gripper open. Returns the settled
+        object states. Raises ValueError for unknown colours or categories, duplicate names, or impossible layouts.
+        """
+        specs = [ObjectSpec.from_name(o) if isinstance(o, str) else o for o in objects] if objects else \
+            scene.default_objects(seed)
+        for spec in specs:
+            spec.validate()
+        names = [spec.name for spec in specs]
+        if len(set(names)) != len(names):
+            raise ValueError(f'object names must be unique: {names}')
+        positions = scene.sample_spawn_positions(specs, seed)
+        key = (self.scene_name, tuple((s.name, s.category, s.color_name) for s in specs))
+        with self.lock:
+            previous_time = 0.0 if self.data is None else float(self.data.time)
+            model = self._models.get(key)
+            if model is None:
+                model = scene.build_model(specs, self.scene_name)
+                # A few compiled models are kept: benchmarks and tests reset the same objects again and again.
+                if len(self._models) >= 8:
+                    self._models.pop(next(iter(self._models)))
+                self._models[key] = model
+            if model is not self.model:
+                self.model = model
+                self.data = mujoco.MjData(model)
+                self._index_model()
+            else:
+                mujoco.mj_resetData(self.model, self.data)
+            self.objects = specs
+            self.seed = seed
+            self._place_robot_at_home()
+            for spec, (x, y) in zip(specs, positions):
+                adr = self._object_qpos_adr[spec.name]
+                z = scene.resting_height(spec.category) + scene.SPAWN_CLEARANCE
+                self.data.qpos[adr:adr + 7] = [x, y, z, 1.0, 0.0, 0.0, 0.0]
+            self.data.time = previous_time
+            mujoco.mj_forward(self.model, self.data)
+            self.run_for(settle_time)
+            return self.object_states()
+
+    def _index_model(self) -> None:
+        model = self.model
+        self._arm_joint_ids = np.array([model.joint(n).id for n in ARM_JOINT_NAMES])
+        self._arm_qpos_adr = model.jnt_qposadr[self._arm_joint_ids]
+        self._arm_dof_adr = model.jnt_dofadr[self._arm_joint_ids]
+        self._arm_actuator_ids = np.array([model.actuator(n.replace('_joint', '')).id for n in ARM_JOINT_NAMES])
+        # Velocity feed-forward through the position servo: ctrl = q_ref + (kv / kp) * qdot_ref.
+        bias = model.actuator_biasprm[self._arm_actuator_ids]
+        self._arm_feedforward = bias[:, 2] / bias[:, 1]
+        self._finger_qpos_adr = model.jnt_qposadr[[model.joint(n).id for n in GRIPPER_JOINT_NAMES]]
+        self._finger_dof_adr = model.jnt_dofadr[[model.joint(n).id for n in GRIPPER_JOINT_NAMES]]
+        self._gripper_actuator_id = model.actuator(GRIPPER_ACTUATOR).id
+        self._gripper_tendon_id = model.tendon(GRIPPER_TENDON).id
+        self._tcp_site_id = model.site(TCP_SITE).id
+        self._flange_site_id = model.site(FLANGE_SITE).id
+        self.arm_joint_limits = model.jnt_range[self._arm_joint_ids].copy()
+        self._object_body_ids = {}
+        self._object_qpos_adr = {}
+        self._object_geom_ids = {}
+        for name in self.objects_in_model():
+            body = model.body(name)
+            self._object_body_ids[name] = body.id
+            self._object_qpos_adr[name] = int(model.jnt_qposadr[model.joint(name).id])
+            self._object_geom_ids[name] = np.flatnonzero(model.geom_bodyid == body.id)
+        self._object_geom_set = np.zeros(model.ngeom, dtype=bool)
+        for ids in self._object_geom_ids.values():
+            self._object_geom_set[ids] = True
+
+    def objects_in_model(self) -> list[str]:
+        """Names of the object bodies of the current model (each has a free joint of the same name)."""
+        model = self.model
+        return [model.body(b).name for b in range(model.nbody)
+                if model.body_jntnum[b] == 1 and model.jnt_type[model.body_jntadr[b]] == mujoco.mjtJoint.mjJNT_FREE]
+
+    def _place_robot_at_home(self) -> None:
+        data = self.data
+        data.qpos[self._arm_qpos_adr] = HOME_JOINT_POSITIONS
+        data.qpos[self._finger_qpos_adr] = GRIPPER_MAX_OPENING / 2
+        self._trajectory: JointTrajectory | None = None
+        self._arm_command_serial += 1
+        self._hold_positions = HOME_JOINT_POSITIONS.copy()
+        self._gripper_target = GRIPPER_MAX_OPENING
+        self._gripper_reference = GRIPPER_MAX_OPENING
+        self._set_gripper_force(GRIPPER_DEFAULT_FORCE)
+        data.ctrl[self._arm_actuator_ids] = HOME_JOINT_POSITIONS
+        data.ctrl[self._gripper_actuator_id] = GRIPPER_MAX_OPENING
+
+    # -------------------------------------------------------------------------------------------- stepping
+    @property
+    def time(self) -> float:
+        """Simulated time [s]."""
+        return float(self.data.time)
+
+    @property
+    def timestep(self) -> float:
+        return float(self.model.opt.timestep)
+
+    def step(self, n: int = 1) -> None:
+        """Advance the physics by n steps, updating the arm and gripper references every step."""
+        with self.lock:
+            model, data = self.model, self.data
+            if self._trajectory is None and self._gripper_reference == self._gripper_target:
+                # Nothing to interpolate: the references are constant, let MuJoCo run the steps in one call.
+                mujoco.mj_step(model, data, nstep=n)
+                return
+            for _ in range(n):
+                self._update_references()
+                mujoco.mj_step(model, data)
+
+    def run_for(self, duration: float) -> None:
+        """Advance simulated time by duration [s] (rounded to whole steps)."""
+        self.step(max(0, int(round(duration / self.timestep))))
+
+    def _update_references(self) -> None:
+        data = self.data
+        if self._trajectory is not None:
+            q_ref, qd_ref = self._trajectory.sample(data.time + self.model.opt.timestep)
+            data.ctrl[self._arm_actuator_ids] = q_ref + self._arm_feedforward * qd_ref
+            if data.time >= self._trajectory.end_time:
+                self._hold_positions = self._trajectory.final_positions
+                self._trajectory = None
+                data.ctrl[self._arm_actuator_ids] = self._hold_positions
+        if self._gripper_reference != self._gripper_target:
+            step = GRIPPER_SPEED * self.model.opt.timestep
+            delta = self._gripper_target - self._gripper_reference
+            self._gripper_reference = self._gripper_target if abs(delta) <= step else \
+                self._gripper_reference + np.sign(delta) * step
+            data.ctrl[self._gripper_actuator_id] = self._gripper_reference
+
+    # ------------------------------------------------------------------------------------------------- arm
+    def joint_positions(self) -> np.ndarray:
+        """Arm joint positions [rad] in ARM_JOINT_NAMES order."""
+        with self.lock:
+            return self.data.qpos[self._arm_qpos_adr].copy()
+
+    def joint_velocities(self) -> np.ndarray:
+        """Arm joint velocities [rad/s] in ARM_JOINT_NAMES order."""
+        with self.lock:
+            return self.data.qvel[self._arm_dof_adr].copy()
+
+    def joint_efforts(self) -> np.ndarray:
+        """Arm actuator torques [N m] in ARM_JOINT_NAMES order."""
+        with self.lock:
+            return self.data.actuator_force[self._arm_actuator_ids].copy()
+
+    def finger_positions(self) -> np.ndarray:
+        """Finger joint positions [m] in GRIPPER_JOINT_NAMES order (each = pad distance from the tcp)."""
+        with self.lock:
+            return self.data.qpos[self._finger_qpos_adr].copy()
+
+    def finger_velocities(self) -> np.ndarray:
+        """Finger joint velocities [m/s] in GRIPPER_JOINT_NAMES order."""
+        with self.lock:
+            return self.data.qvel[self._finger_dof_adr].copy()
+
+    def follow_trajectory(self, times: Sequence[float], positions: Sequence[Sequence[float]],
+                          velocities: Sequence[Sequence[float]] | None = None) -> float:
+        """Make the arm track a timed trajectory; returns its end time on the simulation clock [s].
+
+        times: seconds from now, strictly increasing, >= 0; positions: (N, 6) [rad] in ARM_JOINT_NAMES order;
+        velocities: optional (N, 6) [rad/s]; without them they are estimated (see JointTrajectory). When
+        times[0] > 0 the trajectory starts from the current reference, so replacing a running trajectory is
+        continuous (and smooth when velocities are given). The arm holds the last
+        point afterwards. Raises ValueError for a malformed trajectory or positions outside the joint limits.
+        """
+        times = np.asarray(times, dtype=float)
+        positions = np.asarray(positions, dtype=float)
+        if positions.ndim != 2 or positions.shape[1] != len(ARM_JOINT_NAMES):
+            raise ValueError(f'positions must have shape (N, {len(ARM_JOINT_NAMES)})')
+        if times.ndim != 1 or len(times) == 0 or times[0] < 0:
+            raise ValueError('times must be a non-empty sequence of seconds from now, >= 0')
+        with self.lock:
+            limits = self.arm_joint_limits
+            if np.any(positions < limits[:, 0]) or np.any(positions > limits[:, 1]):
+                raise ValueError('trajectory positions outside the joint limits')
+            velocities = None if velocities is None else np.asarray(velocities, dtype=float)
+            now = self.time
+            if times[0] > 0:
+                q_now, qd_now = self.reference()
+                times = np.concatenate([[0.0], times])
+                positions = np.vstack([q_now, positions])
+                if velocities is not None:
+                    velocities = np.vstack([qd_now, velocities])
+            self._trajectory = JointTrajectory(now + times, positions, velocities)
+            self._arm_command_serial += 1
+            return self._trajectory.end_time
+
+    def reference(self) -> tuple[np.ndarray, np.ndarray]:
+        """The arm's current reference (desired position [rad], velocity [rad/s])."""
+        with self.lock:
+            if self._trajectory is None:
+                return self._hold_positions.copy(), np.zeros(len(ARM_JOINT_NAMES))
+            return self._trajectory.sample(self.time)
+
+    @property
+    def arm_command_serial(self) -> int:
+        """Counts arm commands (trajectories, holds, resets): a change tells a follower it was replaced."""
+        with self.lock:
+            return self._arm_command_serial
+
+    @property
+    def trajectory_end_time(self) -> float | None:
+        """End time of the running trajectory on the simulation clock, or None when the arm is holding."""
+        with self.lock:
+            return None if self._trajectory is None else self._trajectory.end_time
+
+    def hold(self) -> None:
+        """Stop any trajectory; the arm holds where it is now."""
+        with self.lock:
+            self._trajectory = None
+            self._arm_command_serial += 1
+            self._hold_positions = self.joint_positions()
+            self.data.ctrl[self._arm_actuator_ids] = self._hold_positions
+
+    def tcp_pose(self) -> np.ndarray:
+        """4x4 world_T_tcp: the grasp point between the pads; its z axis points from the flange to the fingertips."""
+        return self._site_pose(self._tcp_site_id)
+
+    def flange_pose(self) -> np.ndarray:
+        """4x4 world_T_flange (DH frame 6)."""
+        return self._site_pose(self._flange_site_id)
+
+    def _site_pose(self, site_id: int) -> np.ndarray:
+        with self.lock:
+            pose = np.eye(4)
+            pose[:3, :3] = self.data.site_xmat[site_id].reshape(3, 3)
+            pose[:3, 3] = self.data.site_xpos[site_id]
+            return pose
+
+    # --------------------------------------------------------------------------------------------- gripper
+    def command_gripper(self, opening: float, max_force: float = 0.0) -> None:
+        """Move the fingers to an opening [m] (0 = closed) squeezing with at most max_force [N] per finger.
+
+        max_force <= 0 means GRIPPER_DEFAULT_FORCE. To grasp, command an opening smaller than the object: the
+        fingers stop on it and squeeze with max_force.
+        """
+        with self.lock:
+            self._gripper_target = float(np.clip(opening, 0.0, GRIPPER_MAX_OPENING))
+            force = GRIPPER_DEFAULT_FORCE if max_force <= 0 else min(float(max_force), GRIPPER_MAX_FORCE)
+            self._set_gripper_force(force)
+
+    def _set_gripper_force(self, force: float) -> None:
+        self.model.actuator_forcerange[self._gripper_actuator_id] = [-force, force]
+
+    def gripper_state(self) -> GripperState:
+        with self.lock:
+            return GripperState(
+                opening=float(self.data.ten_length[self._gripper_tendon_id]),
+                force=float(-self.data.actuator_force[self._gripper_actuator_id]),
+                speed=float(abs(self.data.ten_velocity[self._gripper_tendon_id])),
+                target_opening=self._gripper_target,
+                max_force=float(self.model.actuator_forcerange[self._gripper_actuator_id][1]),
+                reference_moving=self._gripper_reference != self._gripper_target)
+
+    # --------------------------------------------------------------------------------------------- objects
+    def object_states(self) -> list[ObjectState]:
+        """Ground truth of every object, in the order of the reset's object list."""
+        with self.lock:
+            return [self._object_state(spec) for spec in self.objects]
+
+    def object_state(self, name: str) -> ObjectState:
+        with self.lock:
+            for spec in self.objects:
+                if spec.name == name:
+                    return self._object_state(spec)
+        raise KeyError(f'no object named {name!r}; objects: {", ".join(s.name for s in self.objects)}')
+
+    def _object_state(self, spec: ObjectSpec) -> ObjectState:
+        model, data = self.model, self.data
+        lows, highs = [], []
+        for geom in self._object_geom_ids[spec.name]:
+            centre_local, half_local = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
+            rotation = data.geom_xmat[geom].reshape(3, 3)
+            centre = data.geom_xpos[geom] + rotation @ centre_local
+            half = np.abs(rotation) @ half_local
+            lows.append(centre - half)
+            highs.append(centre + half)
+        low, high = np.min(lows, axis=0), np.max(highs, axis=0)
+        w, x, y, z = data.xquat[self._object_body_ids[spec.name]]
+        return ObjectState(name=spec.name, category=spec.category, color_name=spec.color_name,
+                           rgba=scene.rgba(spec.color_name), position=tuple(float(v) for v in (low + high) / 2),
+                           orientation_xyzw=(float(x), float(y), float(z), float(w)),
+                           bbox_min=tuple(float(v) for v in low), bbox_max=tuple(float(v) for v in high))
+
+    def object_speeds(self) -> dict[str, float]:
+        """Linear speed of each object's body [m/s] (to tell whether the scene is at rest)."""
+        with self.lock:
+            speeds = {}
+            for name, body in self._object_body_ids.items():
+                adr = self.model.jnt_dofadr[self.model.body_jntadr[body]]
+                speeds[name] = float(np.linalg.norm(self.data.qvel[adr:adr + 3]))
+            return speeds
+
+    def deepest_object_penetration(self) -> tuple[float, str, str]:
+        """(depth [m], geom, geom) of the deepest overlap of an object with the table or another object.
+
+        Computed from the geometry, not from the contact list: objects at rest sleep, and the contacts of
+        sleeping objects are not generated. Depth 0 when nothing overlaps.
+        """
+        with self.lock:
+            model, data = self.model, self.data
+            others = [model.geom('table').id] + [int(g) for ids in self._object_geom_ids.values() for g in ids]
+            deepest = (0.0, '', '')
+            for name, geoms in self._object_geom_ids.items():
+                for geom in geoms:
+                    for other in others:
+                        if model.geom_bodyid[other] == model.geom_bodyid[geom] or other < geom and \
+                                self._object_geom_set[other]:
+                            continue  # same body, or a pair of object geoms already measured the other way round
+                        distance = mujoco.mj_geomDistance(model, data, int(geom), other, 0.01, None)
+                        if -distance > deepest[0]:
+                            deepest = (float(-distance), model.geom(int(geom)).name, model.geom(other).name)
+            return deepest
+
+    # ----------------------------------------------------------------------------------------------- cameras
+    def camera_intrinsics(self, camera: str, width: int = 640, height: int = 480) -> camera_math.CameraIntrinsics:
+        """Pinhole intrinsics of images rendered at width x height from the named camera."""
+        with self.lock:
+            return camera_math.intrinsics_from_fovy(float(self.model.camera(camera).fovy[0]), width, height)
+
+    def camera_pose(self, camera: str) -> np.ndarray:
+        """4x4 world_T_optical of the named camera (ROS optical frame: +z forward, +y down, +x right)."""
+        with self.lock:
+            cam = self.data.camera(camera)
+            return camera_math.optical_pose(cam.xpos.copy(), cam.xmat.copy())
+
+    def render(self, camera: str, width: int = 640, height: int = 480, with_depth: bool = True,
+               quality: str = 'fast') -> tuple[np.ndarray, np.ndarray | None]:
+        """(rgb uint8 HxWx3, depth float32 HxW [m along the optical axis] or None) from the named camera.
+
+        quality "fast" (no shadows, no anti-aliasing) is what the bridge publishes; "pretty" is for pictures.
+        """
+        with self.lock:
+            renderer = self._renderer(width, height, quality)
+            renderer.update(self.data, camera)
+        # The scene is a snapshot: drawing it needs no lock, so physics can go on meanwhile.
+        return renderer.render(with_depth)
+
+    def _renderer(self, width: int, height: int, quality: str) -> RgbdRenderer:
+        key = (threading.get_ident(), width, height, quality)
+        renderer = self._renderers.get(key)
+        if renderer is not None and renderer.model is not self.model:
+            renderer.close()
+            renderer = None
+        if renderer is None:
+            renderer = RgbdRenderer(self.model, width, height, quality)
+            self._renderers[key] = renderer
+        return renderer
+
+    def close(self) -> None:
+        """Free the renderers created by the calling thread."""
+        me = threading.get_ident()
+        for key in [k for k in self._renderers if k[0] == me]:
+            self._renderers.pop(key).close()
+
