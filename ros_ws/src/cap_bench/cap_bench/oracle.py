@@ -38,8 +38,10 @@ def oracle_program(episode: Episode) -> str:
         return (_BLOCKS + "for lower, upper in zip(block_names, block_names[1:]):\n"
                           "    put_first_on_second(upper, lower)\n")
     if template == 'blocks_on_corner':
-        return (_BLOCKS + f"target_xy = {_position(a['corner_side'])}\n"
-                          "for name in block_names:\n    put_first_on_second(name, target_xy)\n")
+        # Pile them up there: each next block goes onto the previous one (by name, so onto where it really is).
+        return (_BLOCKS + f"put_first_on_second(block_names[0], {_position(a['corner_side'])})\n"
+                          "for lower, upper in zip(block_names, block_names[1:]):\n"
+                          "    put_first_on_second(upper, lower)\n")
     if template == 'blocks_in_bowl':
         return _BLOCKS + f"for name in block_names:\n    put_first_on_second(name, {a['bowl']!r})\n"
     if template == 'matching_bowls':

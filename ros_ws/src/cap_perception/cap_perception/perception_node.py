@@ -21,7 +21,7 @@ from std_srvs.srv import Trigger
 
 from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import GetObjectNames, GetObjectState
-from cap_perception.rgbd_detector import CameraView, DetectorConfig, detect, empty_table_at
+from cap_perception.rgbd_detector import CameraView, DetectorConfig, detect
 from cap_perception.ros_conversions import from_msg, image_to_array, to_msg
 from cap_perception.sources import (NoObservationError, SnapshotSource, UnknownObjectError, load_stub_objects,
                                     remember_unseen)
@@ -140,8 +140,7 @@ class PerceptionNode(Node):
             self.get_logger().error(str(error), throttle_duration_sec=5.0)
             return
         detected = detect(view, self._detector_config)
-        self.source.update(remember_unseen(self.source.objects(), detected,
-                                           gone=lambda obj: empty_table_at(view, obj.position)), stamp)
+        self.source.update(remember_unseen(self.source.objects(), detected), stamp)
 
     # ------------------------------------------------------------------------------------------ services
     def _on_forget(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:

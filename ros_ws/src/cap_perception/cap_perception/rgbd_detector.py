@@ -162,15 +162,6 @@ def _classify(color: str, cloud: np.ndarray, config: DetectorConfig) -> list[Per
     return found
 
 
-def empty_table_at(view: CameraView, xy, radius: float = 0.012, config: DetectorConfig = DetectorConfig()) -> bool:
-    """True when the camera sees bare table around `xy`: whatever stood there is gone (not merely hidden)."""
-    points, valid = deproject(view)
-    near = valid & (np.linalg.norm(points[..., :2] - np.asarray(xy, dtype=np.float32)[:2], axis=-1) < radius)
-    if near.sum() < 10:
-        return False  # out of view or behind something: no evidence either way
-    return float(np.mean(points[near][:, 2] < config.min_height)) > 0.8
-
-
 def _block(color: str, cloud: np.ndarray, config: DetectorConfig) -> PerceivedObject:
     # The top face is the best-seen part of a cube from above: its centre is the cube's xy, its height the top.
     top = float(np.percentile(cloud[:, 2], 95))

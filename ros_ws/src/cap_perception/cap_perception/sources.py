@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 import threading
-from typing import Callable, Iterable, Sequence
+from typing import Iterable, Sequence
 
 import yaml
 
@@ -70,14 +70,13 @@ class SnapshotSource:
             return list(self._objects.values()) if self._objects else []
 
 
-def remember_unseen(previous: Iterable[PerceivedObject], seen: Iterable[PerceivedObject],
-                    gone: Callable[[PerceivedObject], bool] = lambda obj: False) -> list[PerceivedObject]:
-    """What a camera sees now, plus every earlier object it no longer sees (hidden under another, or behind the arm),
-    kept at its last known place and marked not visible: objects do not vanish because they are occluded. An
-    unseen object for which `gone(obj)` holds (e.g. the camera sees bare table where it was) is forgotten."""
+def remember_unseen(previous: Iterable[PerceivedObject], seen: Iterable[PerceivedObject]) -> list[PerceivedObject]:
+    """What a camera sees now, plus every earlier object it no longer sees (hidden under another, held in the
+    gripper, behind the arm), kept at its last known place and marked not visible: objects do not vanish because
+    they are occluded. After a scene reset, the node's forget service clears what is remembered."""
     current = {obj.name: obj for obj in seen}
     for obj in previous:
-        if obj.name not in current and not gone(obj):
+        if obj.name not in current:
             current[obj.name] = dataclasses.replace(obj, visible=False)
     return sorted(current.values(), key=lambda obj: obj.name)
 
