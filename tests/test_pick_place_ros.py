@@ -215,9 +215,7 @@ CORNERS = [(-0.25, -0.25), (0.25, -0.25), (-0.25, -0.75), (0.25, -0.75)]
 @pytest.mark.slow
 @pytest.mark.parametrize('source, required, agreement', [
     ('ground_truth', 49, 1e-3),
-    pytest.param('rgbd', 48, 0.02, marks=pytest.mark.xfail(
-        reason='the RGB-D detector merges a block with the bowl of the same colour into one blob and reports the '
-               'block at the blob centre (seeds 1016, 1034, 1036: 47/50)', strict=False)),
+    ('rgbd', 48, 0.02),
 ])
 def test_fifty_random_single_pick_and_place_episodes(ros_context, spin_until, source, required, agreement):
     """50 seeded episodes of the default scene: a random block onto a random bowl, block or free corner.
