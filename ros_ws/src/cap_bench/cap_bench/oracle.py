@@ -38,10 +38,15 @@ def oracle_program(episode: Episode) -> str:
         return (_BLOCKS + "for lower, upper in zip(block_names, block_names[1:]):\n"
                           "    put_first_on_second(upper, lower)\n")
     if template == 'blocks_on_corner':
-        # Pile them up there: each next block goes onto the previous one (by name, so onto where it really is).
-        return (_BLOCKS + f"put_first_on_second(block_names[0], {_position(a['corner_side'])})\n"
-                          "for lower, upper in zip(block_names, block_names[1:]):\n"
-                          "    put_first_on_second(upper, lower)\n")
+        # Two short stacks side by side, far enough apart (7.5 cm) that the open fingers clear the neighbour
+        # whichever way they close: every block within 0.04 m of the place, and no tower tall enough to topple.
+        return (_BLOCKS + f"target_xy = {_position(a['corner_side'])}\n"
+                          "spots = [target_xy + np.array([-0.0375, 0.0]), target_xy + np.array([0.0375, 0.0])]\n"
+                          "for i, name in enumerate(block_names):\n"
+                          "    if i < 2:\n"
+                          "        put_first_on_second(name, spots[i])\n"
+                          "    else:\n"
+                          "        put_first_on_second(name, block_names[i - 2])\n")
     if template == 'blocks_in_bowl':
         return _BLOCKS + f"for name in block_names:\n    put_first_on_second(name, {a['bowl']!r})\n"
     if template == 'matching_bowls':
