@@ -19,7 +19,9 @@ fi
 req_hash=$(cat requirements.txt requirements-runtime.txt constraints.txt | sha1sum | cut -d' ' -f1)
 if [ "$(cat "$VENV/.cap-requirements" 2>/dev/null)" != "$req_hash" ]; then
   step "installing pinned packages (requirements*.txt, constraints.txt)"
-  "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r requirements.txt -c constraints.txt
+  # This machine's pip configuration names extra index folders that may be absent; pip warns once per package.
+  "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r requirements.txt -c constraints.txt 2>&1 \
+    | { grep -v "is ignored: it is neither a file nor a directory" || true; }
   echo "$req_hash" > "$VENV/.cap-requirements"
 else
   step "pinned packages already installed"
