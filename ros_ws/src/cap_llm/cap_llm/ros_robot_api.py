@@ -6,6 +6,7 @@ Every failure raises RobotApiError with a message a person understands.
 """
 from __future__ import annotations
 
+import reprlib
 import threading
 import time
 from typing import Any, Callable
@@ -20,6 +21,12 @@ from std_msgs.msg import String
 from cap_interfaces.action import PickPlace
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectNames, GetObjectState
+
+
+MAX_SAY_CHARS = 2000
+_BOUNDED_REPR = reprlib.Repr()  # Python 3.11: limits are attributes, not constructor arguments
+_BOUNDED_REPR.maxlevel, _BOUNDED_REPR.maxlist, _BOUNDED_REPR.maxtuple, _BOUNDED_REPR.maxdict = 3, 10, 10, 10
+_BOUNDED_REPR.maxstring, _BOUNDED_REPR.maxother = 500, 200
 
 
 class RobotApiError(RuntimeError):
@@ -144,7 +151,13 @@ class RosTabletopApi:
 
     def say(self, text: Any) -> None:
         """Say something to the user (published on /cap/say)."""
-        message = str(text)
+        # A program may pass anything: bound the conversion so a huge structure cannot stall the node.
+        if isinstance(text, str):
+            message = text[:MAX_SAY_CHARS]
+        elif isinstance(text, (bool, int, float, np.generic)) or (isinstance(text, np.ndarray) and text.size <= 100):
+            message = str(text)[:MAX_SAY_CHARS]
+        else:
+            message = _BOUNDED_REPR.repr(text)[:MAX_SAY_CHARS]
         self.said.append(message)
         self._say_publisher.publish(String(data=message))
 
