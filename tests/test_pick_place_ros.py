@@ -31,7 +31,7 @@ Result = PickPlace.Result
 
 
 @pytest.fixture
-def graph(ros_context, request):
+def graph(ros_context, request, spin_until):
     # Tests that interrupt a motion slow the arm down (indirect parameter: the pick_place velocity_scale).
     velocity_scale = getattr(request, 'param', 1.0)
     bridge = SimBridgeNode(context=ros_context, parameter_overrides=[
@@ -46,6 +46,9 @@ def graph(ros_context, request):
     executor = MultiThreadedExecutor(num_threads=8, context=ros_context)
     for node in (bridge, perception, pick_place, client):
         executor.add_node(node)
+    # The graph is ready once perception has the simulator's first object array (a goal sent earlier is refused
+    # with "no objects observed yet").
+    assert spin_until(executor, lambda: bool(perception.source.objects()), timeout=30.0)
     yield executor, bridge.world, action, stop
     executor.shutdown()
     for node in (client, pick_place, perception, bridge):
