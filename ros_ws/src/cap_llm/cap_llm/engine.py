@@ -33,7 +33,7 @@ from typing import Any, Callable, Iterable, Mapping
 from cap_llm.errors import CapLLMError, CodeRejected, ExecutionStopped, GenerationError
 from cap_llm.functions import top_level_functions, undefined_calls
 from cap_llm.llm import Completion, CompletionRequest, LLMClient
-from cap_llm.sandbox import SANDBOX_FILE_PREFIX, CompiledProgram, Sandbox, SandboxLimits
+from cap_llm.sandbox import SANDBOX_FILE_PREFIX, CompiledProgram, Sandbox, SandboxLimits, bounded_exception_text
 
 _log = logging.getLogger(__name__)
 
@@ -173,6 +173,11 @@ class Engine:
             if config.callable_from_code:
                 names[config.name] = self._lmp_caller(config.name)
         self.scope = self.sandbox.new_scope(names)
+        # The robot API, the LMPs, np and the Shapely names are put back before every command: a program that
+        # shadows one (`put_first_on_second = lambda a, b: ...`) changes it for its own command only.
+        fixed = set(names) | {'np'} | set(self.sandbox.shapely_names)
+        self._fixed_names = {name: self.scope[name] for name in fixed}
+        self.sandbox.reset_memory_baseline()  # variables the session keeps count against the memory limit
         self.histories: dict[str, list[str]] = {name: [] for name in self.lmps}
         self.functions: dict[str, str] = {}
 
@@ -349,6 +354,7 @@ class Engine:
                 self._emit(CODE, name, code=result.code)
                 self._emit(EXECUTING, name, code=result.code)
                 execute_started = time.monotonic()
+                self.scope.update(self._fixed_names)
                 with self.sandbox.watching(self._cancel):  # one time limit for the whole program
                     self._execute(config, prepared, command, context)
                 result.success = True
@@ -383,7 +389,7 @@ class Engine:
                 result.stop_reason = error.reason
         else:
             result.error_type = type(error).__name__
-            result.message = f'{type(error).__name__}: {error}'
+            result.message = f'{type(error).__name__}: {bounded_exception_text(error)}'
         if line is not None and not isinstance(error, CodeRejected) and source_line:
             result.message += f' (line {line} of {origin}: `{source_line}`)'
         result.error_line = line

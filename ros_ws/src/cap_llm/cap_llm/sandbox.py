@@ -6,43 +6,71 @@ What a program goes through
    with `_`; frame, generator, coroutine, traceback and code attributes (`gi_`, `f_`, `cr_`, `ag_`, `tb_`, `co_`
    prefixes, `mro`); NumPy's file and raw-memory attributes (`tofile`, `dump`, `ctypes`, ...); attribute assignment
    and deletion; the names exec, eval, compile, open, getattr, setattr, delattr, hasattr, globals, locals, vars, dir,
-   type, object, super, input, breakpoint, help, memoryview; f-string format specs that are nested or wider than
-   the limit. `nonlocal` is allowed: it reaches only the enclosing function's own variables.
+   type, object, super, input, breakpoint, help, memoryview; the string methods translate and maketrans; class
+   patterns in `match` except a builtin type's own `case int(x):` (a class pattern reads attributes with a plain
+   getattr, past every guard); f-string format specs that are nested or wider than the limit. `nonlocal` is
+   allowed: it reaches only the enclosing function's own variables.
 2. **Rewrite**: every binary and augmented operator, every single comparison and every attribute read becomes a call
-   to a checked helper (`sandbox_guards.py`), and every loop body starts with a call to a no-op checkpoint. The
+   to a checked helper (`sandbox_guards.py`), and every loop body starts with a call to a checkpoint. The
    helpers estimate the size of a result first (integer bits of `**`, `*`, `<<`; length of sequence repetition and
-   concatenation; elements of broadcast NumPy operations) and raise ResourceLimitError instead of doing work that
-   exceeds SandboxLimits; string methods that pad, replace, join or format are checked the same way; `str.format`
-   fields may not look up attributes or items (OperationRefused).
+   concatenation, also with NumPy integer counts; elements of broadcast NumPy operations and matrix products) and
+   raise ResourceLimitError instead of doing work that exceeds SandboxLimits; string methods that pad, replace,
+   join or format, and `%` formatting, are checked the same way (output length from the template and its text
+   arguments); `str.format` fields may not look up attributes or items (OperationRefused). `list.extend` and `+=`
+   of an iterable without a length run as a checked Python loop (an iterator over the list itself never ends in
+   C). NumPy methods (`ndarray` and scalars): `resize` takes no `refcheck`, `astype`/`view` and every `dtype=`
+   refuse object, string, void and subarray dtypes; arithmetic on object arrays is refused; `np.diff`'s `n` is
+   bounded by the array size.
 3. **Names**: the program sees restricted builtins (no `type`/`object`, one-argument `iter`, bounded `range`, `sum`
-   as a checked Python loop, and an `__import__` for NumPy's C code, which imports its own submodules through the
-   caller's builtins; the program cannot name it), a NumPy namespace `np` of allow-listed functions with size rules,
-   the Shapely constructors and affinity functions, and the injected robot API and LMPs. Every injected callable is
-   wrapped in a plain function, so attribute traversal from it finds nothing of the host.
+   as a checked Python loop, `map`/`filter`/`zip`/`enumerate`/`reversed` as Python generators whose frames the
+   watchdog sees, so an endless or deeply nested chain meets the time or depth limit, and an `__import__` for
+   NumPy's C code, which imports its own submodules through the caller's builtins; the program cannot name it),
+   a NumPy namespace `np` of allow-listed functions with size rules (they read arguments by name whether passed
+   by position or keyword), the Shapely constructors and affinity functions (coordinates of geometries inside
+   lists count), and the injected robot API and LMPs. Every injected callable is wrapped in a plain function, so
+   attribute traversal from it finds nothing of the host. A program may rebind these names within its own run;
+   the engine puts the robot API, LMP, `np` and Shapely names back before every command.
 4. **Watchdog**: while a program runs, a trace function on the calling thread (sys.settrace) checks, at every line
    and every call of sandboxed code (the helpers included): the wall-clock limit (time spent waiting for the model
    is excluded), the cancel event, the nesting depth of sandboxed calls, and every 5 ms the growth of the process'
    resident memory. A violation raises ExecutionStopped (reason 'timeout', 'cancelled', 'recursion', 'memory')
    through an internal BaseException the program cannot catch (it sees no BaseException, and bare `except` and
-   `finally` are refused). The engine's own work for a nested LMP call (prompting, checking) runs untraced.
+   `finally` are refused). A stop is sticky: CPython swallows an exception raised while a generator is finalized
+   and removes the trace function with it, so the watchdog never raises on the 'call' event of a generator frame
+   (it checks at the frame's first line instead), every later check raises the stop again, loop checkpoints and
+   wrapped calls verify the deadline, the cancel event and that the tracer is still installed, and a run that
+   ends after a swallowed stop still raises ExecutionStopped. Memory growth is measured from the start of the run,
+   or, once `reset_memory_baseline()` was called (the engine does at every session start), from then on: what a
+   session keeps between commands counts against the limit. The engine's own work for a nested LMP call
+   (prompting, checking) runs untraced.
 
 What it guarantees
 - Generated code cannot import, reach dunder attributes, frames, globals or real builtins, or write attributes.
-- A Python-level loop, recursion or generator chain is stopped within one trace event of the limit; a call into
-  the robot API is a checkpoint too.
+- A Python-level loop, recursion or generator chain is stopped within one trace event of the limit, also after a
+  stop was swallowed by a generator finalizer; a call into the robot API is a checkpoint too.
 - Single operations the helpers know (big powers, repetition, padding, NumPy creation and broadcasting, Shapely
   buffers) are refused before they allocate.
 - The host survives: refusals and stops raise SandboxError subclasses; the program's own exceptions (an unknown
   object from the robot API, a TypeError...) propagate unchanged, and the engine reports type, message and line.
+  The engine's report of a program's exception and the sandbox's print() are built with bounded work
+  (`bounded_text`, `bounded_exception_text`: reprlib, at most 10,000 characters).
 
 What it does not guarantee
 - It is not an OS boundary: a bug in CPython, NumPy or Shapely reachable with allowed values is not contained;
-  run untrusted models in a separate process or container for that.
+  run untrusted models in a separate process or container for that. Known instances: C recursion over a deeply
+  nested value built by a loop (`t = (t,)` 300,000 times, then `hash(t)`, `str(t)` or `t == t`) overflows the C
+  stack and kills the process; only process isolation bounds it.
+- Quadratic C work on aliased data is not bounded: `str([row] * 1000)` with a million-element `row`, hashing or
+  comparing tuples that repeat one long tuple, `list.count` over aliased long lists, a set of integers with one
+  hash. Every input stays within the size limits, the single C call runs for minutes or hours and is not
+  interrupted; only a separate process with a kill timer bounds it.
 - C-level work inside a single allowed call is not interrupted (e.g. sorting a million long strings, a NumPy
   reduction over a large array); the size limits keep such calls to seconds, but a robot API call that blocks is
   only checked when it returns.
 - Memory is bounded by the size rules for the operations above, and otherwise by sampling resident memory every
   5 ms: a NumPy function without a size rule could allocate up to its inputs' product before the sampler sees it.
+  Size rules are estimates: NumPy arrays built from nested lists are estimated from their first element, and
+  string arrays inferred from data (`np.array(['a' * 10 ** 6] * 2)`) are not refused.
   The sampler measures the whole process, so other threads' allocations count against the limit.
 - Chained comparisons (`a < b < c`) are not rewritten.
 - The tracer replaces any other trace function (a debugger, coverage) on the thread while a program runs.
@@ -51,10 +79,12 @@ from __future__ import annotations
 
 import ast
 import builtins
+import inspect
 import itertools
 import logging
 import os
 import re
+import reprlib
 import sys
 import threading
 import time
@@ -98,7 +128,7 @@ FORBIDDEN_NAMES = frozenset({
 })
 FORBIDDEN_ATTRIBUTES = frozenset({
     'mro', 'ctypes', 'tofile', 'dump', 'dumps', 'load', 'loads', 'save', 'savetxt', 'setfield', 'getfield',
-    'func_globals', 'func_code', 'im_func', 'im_self', 'format_map',
+    'func_globals', 'func_code', 'im_func', 'im_self', 'format_map', 'translate', 'maketrans',
 })
 FORBIDDEN_ATTRIBUTE_PREFIXES = ('_', 'gi_', 'f_', 'cr_', 'ag_', 'tb_', 'co_')
 _FORBIDDEN_NODES = {
@@ -114,6 +144,8 @@ _FORBIDDEN_NODES = {
     ast.TryStar: '`except*` is not allowed',
 }
 _WIDTH = re.compile(r'\d+')
+_SELF_MATCHING_TYPES = frozenset({'bool', 'bytes', 'dict', 'float', 'frozenset', 'int', 'list', 'set', 'str',
+                                  'tuple', 'complex'})
 
 
 class _Checker(ast.NodeVisitor):
@@ -190,9 +222,12 @@ class _Checker(ast.NodeVisitor):
         self.generic_visit(node)
 
     def visit_MatchClass(self, node: ast.MatchClass) -> None:
-        for name in node.kwd_attrs:
-            if name.startswith(FORBIDDEN_ATTRIBUTE_PREFIXES) or name in FORBIDDEN_ATTRIBUTES:
-                self.refuse(node, f'the attribute {name!r} is not allowed in generated code')
+        # A class pattern reads attributes with a plain getattr (keyword patterns, and positional ones through
+        # __match_args__), past every guard: only the builtin types' own self-match `case int(x):` is allowed.
+        if node.kwd_attrs:
+            self.refuse(node, 'class patterns with keywords (`case str(name=...)`) are not allowed in generated code')
+        if not (isinstance(node.cls, ast.Name) and node.cls.id in _SELF_MATCHING_TYPES) or len(node.patterns) > 1:
+            self.refuse(node, 'class patterns are allowed for builtin types only, e.g. `case int(x):`')
         self.generic_visit(node)
 
     def visit_FormattedValue(self, node: ast.FormattedValue) -> None:
@@ -342,9 +377,51 @@ _SHAPELY_OPS = ('unary_union', 'nearest_points')
 _program_log = logging.getLogger('cap_llm.program')
 
 
-def _program_print(*values: Any, sep: str = ' ', **_ignored: Any) -> None:
+_BOUNDED_REPR = reprlib.Repr()
+_BOUNDED_REPR.maxlevel = 3
+_BOUNDED_REPR.maxlist = _BOUNDED_REPR.maxtuple = _BOUNDED_REPR.maxset = _BOUNDED_REPR.maxfrozenset = 10
+_BOUNDED_REPR.maxdict = _BOUNDED_REPR.maxdeque = _BOUNDED_REPR.maxarray = 10
+_BOUNDED_REPR.maxstring = _BOUNDED_REPR.maxother = 500
+_BOUNDED_REPR.maxlong = 500
+MAX_TEXT = 10_000
+_PLAIN = (str, int, float, bool, type(None))
+
+
+def bounded_text(value: Any, limit: int = MAX_TEXT) -> str:
+    """str() of a program's value with bounded work: containers are abbreviated (str() of an aliased nested list
+    could take hours), long text is cut."""
+    if isinstance(value, str):
+        text = value
+    elif isinstance(value, (float, bool, type(None))) or (isinstance(value, int) and value.bit_length() < 4000):
+        text = str(value)
+    else:
+        text = _BOUNDED_REPR.repr(value)
+    return text if len(text) <= limit else text[:limit] + '...'
+
+
+def bounded_exception_text(error: BaseException, limit: int = MAX_TEXT) -> str:
+    """The message of a program's exception, built with bounded work whatever its arguments are."""
+    if all(isinstance(arg, _PLAIN) and not (isinstance(arg, int) and arg.bit_length() >= 4000)
+           for arg in error.args):
+        text = str(error)  # plain arguments: the exception's own wording, cost bounded by their size
+    elif len(error.args) == 1:
+        text = bounded_text(error.args[0], limit)
+    else:
+        text = _BOUNDED_REPR.repr(error.args)
+    return text if len(text) <= limit else text[:limit] + '...'
+
+
+def _program_print(*values: Any, sep: Any = ' ', **_ignored: Any) -> None:
     """print() of generated code goes to the log (models print now and then; stdout is not theirs)."""
-    _program_log.info('%s', str(sep).join(str(value) for value in values)[:10_000])
+    separator = bounded_text(sep, 100)
+    parts: list[str] = []
+    total = 0
+    for value in values:
+        if total > MAX_TEXT:
+            break
+        parts.append(bounded_text(value))
+        total += len(parts[-1]) + len(separator)
+    _program_log.info('%s', separator.join(parts)[:MAX_TEXT])
 
 
 _INTERNAL_IMPORT_ROOTS = frozenset({'numpy', 'shapely'})
@@ -388,6 +465,7 @@ class _StopSignal(BaseException):
         self.reason = reason
 
 
+_RESUMABLE = inspect.CO_GENERATOR | inspect.CO_COROUTINE | inspect.CO_ASYNC_GENERATOR
 _PAGE_SIZE = os.sysconf('SC_PAGE_SIZE') if hasattr(os, 'sysconf') else 4096
 
 
@@ -403,14 +481,16 @@ def _resident_bytes() -> int:
 class Watchdog:
     """Deadline, cancel, depth and memory checks for the sandboxed frames of one run on the calling thread."""
 
-    def __init__(self, limits: SandboxLimits, cancel_event: threading.Event | None) -> None:
+    def __init__(self, limits: SandboxLimits, cancel_event: threading.Event | None,
+                 memory_baseline: int | None = None) -> None:
         self.limits = limits
         self.cancel_event = cancel_event or threading.Event()
         self.deadline = time.monotonic() + limits.time_limit_s
         self.depth = 0
-        self.memory_baseline = _resident_bytes()
+        self.memory_baseline = _resident_bytes() if memory_baseline is None else memory_baseline
         self.next_memory_check = 0.0
         self.stopped: _StopSignal | None = None
+        self.tracer = self.trace  # one bound method, so `sys.gettrace() is self.tracer` is a cheap identity test
 
     @contextmanager
     def paused(self) -> Iterator[None]:
@@ -431,10 +511,16 @@ class Watchdog:
         try:
             yield
         finally:
-            sys.settrace(self.trace)
+            sys.settrace(self.tracer)
 
     def check(self) -> None:
-        """Raise the stop signal if the run must end (used by the tracer and between model calls)."""
+        """Raise the stop signal if the run must end (used by the tracer and between model calls).
+
+        A stop is sticky: CPython swallows an exception raised while a generator is finalized (and removes the
+        trace function with it), so every later check raises it again.
+        """
+        if self.stopped is not None:
+            raise _StopSignal(str(self.stopped), self.stopped.reason)
         if self.cancel_event.is_set():
             self._stop('the program was cancelled', 'cancelled')
         now = time.monotonic()
@@ -448,14 +534,31 @@ class Watchdog:
                 self._stop(f'the program used more than {self.limits.max_memory_growth_bytes // (1 << 20)} MiB of '
                            'memory and was stopped', 'memory')
 
+    def checkpoint(self) -> None:
+        """Explicit check from loop bodies and wrapped calls. While the tracer is installed it has just checked
+        deadline and cancel at this call's 'call' event; once it was removed (a stop swallowed in a finalizer), no
+        trace event comes again and this check raises the stop."""
+        if sys.gettrace() is self.tracer and self.stopped is None:
+            return
+        if self.stopped is None:
+            self._stop('the program disabled the time limit and was stopped', 'timeout')
+        self.check()
+
     def _stop(self, message: str, reason: str) -> None:
         self.stopped = _StopSignal(message, reason)
-        raise self.stopped
+        raise _StopSignal(message, reason)
+
+    def _check_depth(self) -> None:
+        if self.depth > self.limits.max_call_depth:
+            self._stop(f'the program nested calls deeper than {self.limits.max_call_depth} levels (runaway '
+                       'recursion?) and was stopped', 'recursion')
 
     def _trace_local(self, frame: Any, event: str, arg: Any) -> Any:
         if event == 'return':
             self.depth -= 1
-        else:
+        elif event == 'line':
+            if self.depth > self.limits.max_call_depth:
+                self._check_depth()
             self.check()
         return self._trace_local
 
@@ -463,10 +566,12 @@ class Watchdog:
         if event != 'call' or not frame.f_code.co_filename.startswith(SANDBOX_FILE_PREFIX):
             return None
         self.depth += 1
-        if self.depth > self.limits.max_call_depth:
-            self._stop(f'the program nested calls deeper than {self.limits.max_call_depth} levels (runaway '
-                       'recursion?) and was stopped', 'recursion')
-        self.check()
+        if not frame.f_code.co_flags & _RESUMABLE:
+            # Generator frames are resumed by finalizers too, where a raised stop would be swallowed: their
+            # checks happen at their first line event instead.
+            if self.depth > self.limits.max_call_depth:
+                self._check_depth()
+            self.check()
         return self._trace_local
 
 
@@ -493,16 +598,31 @@ class Sandbox:
         guards['LIMITS'] = self.limits
         guards['ResourceLimitError'] = ResourceLimitError
         guards['OperationRefused'] = OperationRefused
+        guards['checkpoint'] = self._checkpoint
         self._guards = guards
         self._sources: dict[str, CompiledProgram] = {}
         self._local = threading.local()
+        # None: memory growth is measured per run; a session (the engine) sets it so kept variables count.
+        self.memory_baseline: int | None = None
         self.builtins = self._make_builtins()
         self.numpy = self._make_numpy()
         self.shapely_names = self._make_shapely()
 
+    def reset_memory_baseline(self) -> None:
+        """Measure memory growth from now on (a new session): variables kept between runs count against the
+        limit, so a session cannot grow by the full limit once per command."""
+        self.memory_baseline = _resident_bytes()
+
+    def _checkpoint(self) -> None:
+        watchdog = getattr(self._local, 'watchdog', None)
+        if watchdog is not None:
+            watchdog.checkpoint()
+
     # -- names ------------------------------------------------------------------------------------------
     def _make_builtins(self) -> dict[str, Any]:
         names = {name: getattr(builtins, name) for name in _SAFE_BUILTIN_NAMES}
+        names.update({name: self._guards['guarded_' + name]
+                      for name in ('map', 'filter', 'zip', 'enumerate', 'reversed')})
         names.update(range=self._guards['guarded_range'], iter=self._guards['guarded_iter'],
                      sum=self._guards['guarded_sum'], pow=self._guards['guarded_pow'],
                      round=self._guards['guarded_round'], print=self.wrap_callable(_program_print))
@@ -594,12 +714,14 @@ class Sandbox:
         if outer is not None:
             yield outer
             return
-        watchdog = Watchdog(self.limits, cancel_event)
+        watchdog = Watchdog(self.limits, cancel_event, self.memory_baseline)
         previous = sys.gettrace()
         self._local.watchdog = watchdog
-        sys.settrace(watchdog.trace)
+        sys.settrace(watchdog.tracer)
         try:
             yield watchdog
+            if watchdog.stopped is not None:  # a stop that something swallowed still ends the run
+                raise _StopSignal(str(watchdog.stopped), watchdog.stopped.reason)
         except _StopSignal as signal:
             raise ExecutionStopped(str(signal), signal.reason) from None
         except RecursionError:
@@ -614,3 +736,4 @@ class Sandbox:
         with self.watching(cancel_event) as watchdog:
             watchdog.check()
             exec(program.code, scope)
+            watchdog.check()  # raises again a stop that was swallowed during the run

@@ -1,26 +1,33 @@
 """Checked versions of the operations generated code may use, and the wrappers around what it may call.
 
 This file is not imported as a module by the engine: `cap_llm.sandbox` compiles its source under the sandbox's own
-file name and executes it once per Sandbox with the names LIMITS (a SandboxLimits) and ResourceLimitError bound.
-Compiled that way, every call into these helpers is seen by the sandbox's tracer, so the wall-clock limit and the
-cancel request are checked each time generated code calls an operator, a NumPy function or a robot API function,
-and inside the Python-level loops below (sum, join).
+file name and executes it once per Sandbox with the names LIMITS (a SandboxLimits), ResourceLimitError,
+OperationRefused and checkpoint bound. Compiled that way, every call into these helpers is seen by the sandbox's
+tracer, so the wall-clock limit and the cancel request are checked each time generated code calls an operator, a
+NumPy function or a robot API function, and inside the Python-level loops below (sum, extend, the iteration
+generators). `tick` and wrapped calls also call `checkpoint` explicitly, which works even when the trace function
+was removed.
 
 Each guard estimates the size of a result *before* the C-level work happens and raises ResourceLimitError when it
 would exceed LIMITS; the message names the operation and the limit.
 """
+import functools
+import itertools
 import math
 import operator
 import re
 import string
+from sys import gettrace as _gettrace
 
 import numpy
 
+import shapely
 from shapely.geometry.base import BaseGeometry
 
 LIMITS = None  # bound by the sandbox
 ResourceLimitError = None  # bound by the sandbox
 OperationRefused = None  # bound by the sandbox
+checkpoint = None  # bound by the sandbox: deadline, cancel and tracer check of the run on this thread
 
 _SEQUENCES = (str, bytes, bytearray, list, tuple)
 _ARRAYS = (numpy.ndarray, numpy.generic)
@@ -46,12 +53,24 @@ def _array_size_estimate(value):
     """Element count numpy would make of `value` (nested lists are estimated from their first element)."""
     if isinstance(value, _ARRAYS):
         return int(value.size)
-    if isinstance(value, (list, tuple)):
+    if isinstance(value, (list, tuple, range)):
         if not value:
             return 0
         inner = _array_size_estimate(value[0])
         return len(value) * max(inner, 1)
     return 1
+
+
+def check_dtype(value, what):
+    """Object, string, void and subarray dtypes: unbounded per-element work or size, or raw memory reinterpretation."""
+    if value is None:
+        return
+    try:
+        dtype = numpy.dtype(value)
+    except Exception:
+        return  # not a dtype: numpy reports its own error
+    if dtype.kind in 'OUSV' or dtype.subdtype is not None or dtype.fields is not None:
+        forbid(f'{what}: the dtype {value!r} (objects, strings or raw records) is not available in the sandbox')
 
 
 def check_elements(count, what):
@@ -73,6 +92,8 @@ def check_int_bits(bits, what):
 
 def _check_broadcast(a, b, what):
     if isinstance(a, _ARRAYS) or isinstance(b, _ARRAYS):
+        if getattr(a, 'dtype', None) == object or getattr(b, 'dtype', None) == object:
+            forbid(f'{what} on an object array is not available in the sandbox (its elements grow without bound)')
         shape_a = numpy.shape(a) if isinstance(a, (_ARRAYS, list, tuple)) else ()
         shape_b = numpy.shape(b) if isinstance(b, (_ARRAYS, list, tuple)) else ()
         try:
@@ -83,12 +104,15 @@ def _check_broadcast(a, b, what):
 
 
 # ---------------------------------------------------------------------------------------------------- operators
+_INTEGERS = (int, numpy.integer)
+
+
 def _repeat_check(a, b, what):
-    """Sequence repetition (`'ab' * n`, `[0] * n`)."""
-    if isinstance(a, _SEQUENCES) and isinstance(b, int):
-        check_length(len(a) * max(b, 0), what)
-    elif isinstance(b, _SEQUENCES) and isinstance(a, int):
-        check_length(len(b) * max(a, 0), what)
+    """Sequence repetition (`'ab' * n`, `[0] * n`, also with a NumPy integer count)."""
+    if isinstance(a, _SEQUENCES) and isinstance(b, _INTEGERS):
+        check_length(len(a) * max(operator.index(b), 0), what)
+    elif isinstance(b, _SEQUENCES) and isinstance(a, _INTEGERS):
+        check_length(len(b) * max(operator.index(a), 0), what)
 
 
 def op_mult(a, b):
@@ -179,6 +203,9 @@ def op_add(a, b):
 
 
 def op_iadd(a, b):
+    if type(a) is list and not isinstance(b, _SEQUENCES):
+        checked_extend(a, b, 'this in-place concatenation')
+        return a
     _concat_check(a, b)
     a += b
     return a
@@ -187,19 +214,64 @@ def op_iadd(a, b):
 _PERCENT_FIELD = re.compile(r'%(?:\([^)]*\))?[-#0 +]*(\*|\d+)?(?:\.(\*|\d+))?')
 
 
-def _check_percent_format(template):
+# The template checks below work on whole lists with C-level map/filter/join: a template may hold hundreds of
+# thousands of fields, and a traced Python loop over them would spend the time limit on the check itself.
+_FIRST = operator.itemgetter(0)
+_SECOND = operator.itemgetter(1)
+_THIRD = operator.itemgetter(2)
+
+
+def _numbers_in(texts):
+    """The integers written in `texts` (format specs, widths), as ints."""
+    return list(map(int, re.findall(r'\d+', '\x00'.join(texts))))
+
+
+def _text_length(value):
+    return len(value) if isinstance(value, (str, bytes, bytearray)) else 0
+
+
+_TEXT_TESTS = tuple(functools.partial(type.__instancecheck__, kind) for kind in (str, bytes, bytearray))
+_IS_NOT_NONE = functools.partial(operator.is_not, None)
+
+
+def _text_lengths(values):
+    """Lengths of the text values among `values`, computed in C."""
+    return list(itertools.chain.from_iterable(map(len, filter(test, values)) for test in _TEXT_TESTS))
+
+
+def _percent_fields(template):
     text = template.decode('latin-1') if isinstance(template, (bytes, bytearray)) else template
-    for width, precision in _PERCENT_FIELD.findall(text):
-        for number in (width, precision):
-            if number == '*':
-                forbid("'%' formatting with a '*' width is not allowed in the sandbox")
-            if number and int(number) > LIMITS.max_format_width:
-                refuse(f"'%' formatting width {number} exceeds the sandbox's {LIMITS.max_format_width}")
+    return _PERCENT_FIELD.findall(text)
+
+
+def _check_percent_format(template):
+    found = _percent_fields(template)
+    numbers = list(filter(None, itertools.chain(map(_FIRST, found), map(_SECOND, found))))
+    if '*' in numbers:
+        forbid("'%' formatting with a '*' width is not allowed in the sandbox")
+    widest = max(map(int, numbers), default=0)
+    if widest > LIMITS.max_format_width:
+        refuse(f"'%' formatting width {widest} exceeds the sandbox's {LIMITS.max_format_width}")
+
+
+def _check_percent_output(template, values):
+    """Output length of `template % values`: the template, every width, and the text arguments (each used once,
+    or every field may use the longest when fields name keys of a mapping)."""
+    found = _percent_fields(template)
+    padding = sum(_numbers_in(itertools.chain(map(_FIRST, found), map(_SECOND, found))))
+    if isinstance(values, tuple):
+        extra = sum(_text_lengths(values[:len(found)]))
+    elif isinstance(values, dict):
+        extra = len(found) * max(_text_lengths(values.values()), default=0)
+    else:
+        extra = _text_length(values)
+    check_length(len(template) + extra + padding, "this '%' formatting")
 
 
 def op_mod(a, b):
     if isinstance(a, (str, bytes, bytearray)):
         _check_percent_format(a)
+        _check_percent_output(a, b)
     else:
         _check_broadcast(a, b, 'this array remainder')
     return a % b
@@ -208,6 +280,7 @@ def op_mod(a, b):
 def op_imod(a, b):
     if isinstance(a, (str, bytes, bytearray)):
         _check_percent_format(a)
+        _check_percent_output(a, b)
     else:
         _check_broadcast(a, b, 'this array remainder')
     a %= b
@@ -244,10 +317,17 @@ cmp_ge = _make_array_op(operator.ge, 'comparison')
 
 
 def _matmul_check(a, b):
+    """Elements of a @ b (batch dimensions broadcast) or np.dot(a, b), whichever is larger."""
     if isinstance(a, _ARRAYS) and isinstance(b, _ARRAYS) and a.ndim and b.ndim:
-        rows = a.size // max(a.shape[-1], 1)
-        cols = b.shape[-1] if b.ndim > 1 else 1
-        check_elements(rows * cols, 'this matrix product')
+        dot = math.prod(a.shape[:-1]) * (math.prod(b.shape[:-2]) * b.shape[-1] if b.ndim > 1 else 1)
+        matmul = 0
+        if a.ndim > 1 and b.ndim > 1:
+            try:
+                batch = math.prod(numpy.broadcast_shapes(a.shape[:-2], b.shape[:-2]))
+            except ValueError:
+                batch = 0  # numpy raises its own error
+            matmul = batch * a.shape[-2] * b.shape[-1]
+        check_elements(max(dot, matmul), 'this matrix product')
 
 
 def op_matmult(a, b):
@@ -262,7 +342,10 @@ def op_imatmult(a, b):
 
 
 def tick():
-    """Called at the top of every loop body of generated code: the tracer checks limits on each call."""
+    """Called at the top of every loop body of generated code: the tracer checks limits on each call; when the
+    trace function was removed (a stop swallowed by a generator finalizer) the explicit checkpoint raises."""
+    if _gettrace() is None:
+        checkpoint()
 
 
 def augmented_item(container, key, inplace_op, value):
@@ -288,6 +371,92 @@ def guarded_iter(*args):
     return iter(args[0])
 
 
+# map, filter, zip, enumerate and reversed as Python generators: their frames are traced, so an endless chain
+# (any(map(x.append, x))) meets the time limit and a deep nesting meets max_call_depth instead of the C stack.
+def _map(function, iterators):
+    if len(iterators) == 1:
+        for item in iterators[0]:
+            yield function(item)
+    else:
+        for items in _zip(iterators, False):
+            yield function(*items)
+
+
+def guarded_map(function, iterable, *iterables):
+    return _map(function, [iter(iterable)] + [iter(more) for more in iterables])
+
+
+def _filter(function, iterator):
+    for item in iterator:
+        if (item if function is None else function(item)):
+            yield item
+
+
+def guarded_filter(function, iterable):
+    return _filter(function, iter(iterable))
+
+
+def _zip(iterators, strict):
+    if not iterators:
+        return
+    while True:
+        items = []
+        for index, iterator in enumerate(iterators):
+            try:
+                items.append(next(iterator))
+            except StopIteration:
+                if strict and (index or _any_left(iterators[1:])):
+                    raise ValueError('zip() arguments have different lengths') from None
+                return
+        yield tuple(items)
+
+
+def _any_left(iterators):
+    for iterator in iterators:
+        for _item in iterator:
+            return True
+    return False
+
+
+def guarded_zip(*iterables, strict=False):
+    return _zip([iter(iterable) for iterable in iterables], strict)
+
+
+def _enumerate(iterator, start):
+    index = start
+    for item in iterator:
+        yield index, item
+        index += 1
+
+
+def guarded_enumerate(iterable, start=0):
+    return _enumerate(iter(iterable), operator.index(start))
+
+
+def _each(iterator):
+    for item in iterator:
+        yield item
+
+
+def guarded_reversed(sequence):
+    return _each(reversed(sequence))
+
+
+def checked_extend(target, iterable, what):
+    """list.extend / += of an iterable without a length: a checked Python loop (the iterable may be the list's
+    own iterator, which never ends in C)."""
+    size = _len_or_none(iterable)
+    if size is not None:
+        check_length(len(target) + size, what)
+        target.extend(iterable)
+        return
+    append = target.append
+    for item in iterable:
+        append(item)
+        if len(target) > LIMITS.max_sequence_length:
+            check_length(len(target), what)
+
+
 def guarded_sum(iterable, start=0):
     """sum() as a Python loop of checked additions: C-level sum of lists or arrays is neither bounded nor stoppable."""
     total = start
@@ -308,15 +477,25 @@ def _check_format_spec(spec, what):
             refuse(f'{what}: width {number} exceeds the sandbox limit of {LIMITS.max_format_width}')
 
 
-def check_format_template(template):
-    """str.format templates may name fields by position or keyword only: no `.attr` or `[key]` lookups."""
-    for _literal, field, spec, _conversion in _FORMATTER.parse(template):
-        if field is None:
-            continue
-        if '.' in field or '[' in field:
-            forbid(f'format field {{{field}}} looks up an attribute or item; the sandbox allows plain fields only')
-        if spec:
-            _check_format_spec(spec, 'str.format')
+def check_format_template(template, args=(), kwargs=None):
+    """str.format templates may name fields by position or keyword only: no `.attr` or `[key]` lookups.
+    The output length is bounded too: the template, every number in the specs, and for each field the longest
+    text argument (an upper bound: fields may repeat an argument)."""
+    parsed = list(_FORMATTER.parse(template))
+    fields = list(filter(_IS_NOT_NONE, map(_SECOND, parsed)))
+    names = '\x00'.join(fields)
+    if '.' in names or '[' in names:
+        forbid('format fields that look up an attribute or item (`{0.name}`, `{0[key]}`) are not allowed; the '
+               'sandbox allows plain fields only')
+    specs = list(filter(None, map(_THIRD, parsed)))
+    if '{' in '\x00'.join(specs):
+        forbid('str.format: nested format fields are not allowed in the sandbox')
+    numbers = _numbers_in(specs)
+    widest = max(numbers, default=0)
+    if widest > LIMITS.max_format_width:
+        refuse(f'str.format: width {widest} exceeds the sandbox limit of {LIMITS.max_format_width}')
+    longest = max(_text_lengths(itertools.chain(args, (kwargs or {}).values())), default=0)
+    check_length(len(template) + sum(numbers) + len(fields) * longest, 'str.format')
 
 
 def _string_method(obj, name):
@@ -351,7 +530,7 @@ def _string_method(obj, name):
         return join
     if name == 'format':
         def format_(*args, **kwargs):
-            check_format_template(obj)
+            check_format_template(obj, args, kwargs)
             return method(*args, **kwargs)
         return format_
     if name in ('format_map', 'translate', 'maketrans'):
@@ -363,10 +542,7 @@ def _list_method(obj, name):
     method = getattr(obj, name)
     if name == 'extend':
         def extend(iterable):
-            size = _len_or_none(iterable)
-            if size is not None:
-                check_length(len(obj) + size, 'list.extend')
-            return method(iterable)
+            checked_extend(obj, iterable, 'list.extend')
         return extend
     return method
 
@@ -375,15 +551,26 @@ def _array_method(obj, name):
     method = getattr(obj, name)
     if name == 'repeat':
         def repeat(repeats, *rest, **kwargs):
-            check_elements(obj.size * int(numpy.max(repeats)) if numpy.size(repeats) else 0, 'ndarray.repeat')
+            check_elements(numpy.size(obj) * int(numpy.max(repeats)) if numpy.size(repeats) else 0,
+                           'ndarray.repeat')
             return method(repeats, *rest, **kwargs)
         return repeat
     if name == 'resize':
         def resize(*shape, **kwargs):
+            if kwargs:  # refcheck=False frees memory that views still use
+                forbid('ndarray.resize takes no keyword arguments in the sandbox')
             dims = shape[0] if len(shape) == 1 and isinstance(shape[0], (tuple, list)) else shape
-            check_elements(math.prod(int(d) for d in dims), 'ndarray.resize')
-            return method(*shape, **kwargs)
+            check_elements(math.prod(operator.index(d) for d in dims), 'ndarray.resize')
+            return method(*shape)
         return resize
+    if name in ('astype', 'view'):
+        def converted(*args, **kwargs):
+            for value in args[:1] + tuple(kwargs.get(key) for key in ('dtype', 'type')):
+                check_dtype(value, f'ndarray.{name}')
+            if name == 'view' and kwargs.get('type') is not None:
+                forbid('ndarray.view(type=...) is not available in the sandbox')
+            return method(*args, **kwargs)
+        return converted
     if name in ('dot', 'outer'):
         def product(other, *rest, **kwargs):
             _matmul_check(obj, numpy.asarray(other))
@@ -395,15 +582,25 @@ def _array_method(obj, name):
 _MAX_QUAD_SEGS = 64
 
 
+def _segment_count(value):
+    if isinstance(value, (float, numpy.floating)):
+        return int(value)
+    if isinstance(value, bool):
+        return 0
+    return operator.index(value)
+
+
 def _geometry_method(obj, name):
     method = getattr(obj, name)
     if name in ('buffer', 'offset_curve', 'parallel_offset'):
         def buffered(distance, *args, **kwargs):
-            candidates = [kwargs.get('quad_segs'), kwargs.get('resolution')] + list(args)
-            segments = max([int(c) for c in candidates if isinstance(c, (int, float)) and not isinstance(c, bool)],
-                           default=0)
+            candidates = [kwargs.get('quad_segs'), kwargs.get('resolution')] + list(args[:1])
+            segments = max([_segment_count(c) for c in candidates if c is not None], default=0)
             if segments > _MAX_QUAD_SEGS:
                 refuse(f'{name} with {segments} segments per quarter circle; the sandbox allows {_MAX_QUAD_SEGS}')
+            # an array of distances makes one geometry per distance
+            check_elements(int(numpy.size(distance)) * (4 * max(segments, 16) + 1) * max(len(obj.bounds), 1),
+                           name)
             return method(distance, *args, **kwargs)
         return buffered
     if name == 'segmentize':
@@ -431,7 +628,7 @@ def guarded_getattr(obj, name):
         return _string_method(obj, name)
     if isinstance(obj, list):
         return _list_method(obj, name)
-    if isinstance(obj, numpy.ndarray):
+    if isinstance(obj, _ARRAYS):
         return _array_method(obj, name)
     if isinstance(obj, BaseGeometry):
         return _geometry_method(obj, name)
@@ -447,113 +644,163 @@ def guarded_getattr(obj, name):
 def wrap_callable(function):
     """A plain function that calls `function`: generated code sees no attributes of what it wraps."""
     def call(*args, **kwargs):
+        if _gettrace() is None:
+            checkpoint()
         return function(*args, **kwargs)
     return call
 
 
 def _shape_count(shape):
+    if shape is None:
+        return 1
     if isinstance(shape, (int, numpy.integer)):
-        return int(shape)
-    return math.prod(int(d) for d in shape)
+        return operator.index(shape)
+    return math.prod(operator.index(d) for d in shape)
 
 
-def _rule_shape(args, kwargs):
-    shape = kwargs.get('shape', args[0] if args else 0)
-    return _shape_count(shape)
+def _size(value):
+    return _array_size_estimate(value)
 
 
-def _rule_shape_args(args, kwargs):
-    """np.random.rand(2, 3) style: every positional argument is a dimension."""
-    return math.prod(int(d) for d in args) if args else 1
+def _broadcast_count(*values):
+    try:
+        return math.prod(numpy.broadcast_shapes(*(numpy.shape(v) for v in values if v is not None)))
+    except Exception:
+        return 0  # numpy raises its own error
 
 
-def _rule_size_kw(args, kwargs, position=None):
-    size = kwargs.get('size')
-    if size is None and position is not None and len(args) > position:
-        size = args[position]
-    return 1 if size is None else _shape_count(size)
+# Positional parameter names of the allow-listed functions that have size rules: a rule reads one dict whatever
+# mix of positional and keyword arguments the program used.
+PARAMETERS = {
+    'zeros': ('shape', 'dtype'), 'ones': ('shape', 'dtype'), 'empty': ('shape', 'dtype'),
+    'full': ('shape', 'fill_value', 'dtype'), 'zeros_like': ('a', 'dtype', 'order', 'subok', 'shape'),
+    'ones_like': ('a', 'dtype', 'order', 'subok', 'shape'), 'linspace': ('start', 'stop', 'num'),
+    'eye': ('N', 'M', 'k', 'dtype'), 'identity': ('n', 'dtype'), 'array': ('object', 'dtype'),
+    'asarray': ('a', 'dtype'), 'outer': ('a', 'b'), 'kron': ('a', 'b'), 'tile': ('A', 'reps'),
+    'repeat': ('a', 'repeats', 'axis'), 'dot': ('a', 'b'), 'matmul': ('x1', 'x2'), 'diff': ('a', 'n', 'axis'),
+    'concatenate': ('arrays',), 'stack': ('arrays',), 'vstack': ('tup',), 'hstack': ('tup',),
+    'column_stack': ('tup',), 'random': ('size',), 'normal': ('loc', 'scale', 'size'),
+    'uniform': ('low', 'high', 'size'), 'randint': ('low', 'high', 'size', 'dtype'),
+    'choice': ('a', 'size', 'replace', 'p'),
+}
 
 
-def _rule_arange(args, kwargs):
-    values = list(args) + [kwargs[k] for k in ('start', 'stop', 'step') if k in kwargs]
-    start, stop, step = 0, None, 1
-    if len(values) == 1:
-        stop = values[0]
-    elif len(values) == 2:
-        start, stop = values
-    elif len(values) >= 3:
-        start, stop, step = values[:3]
+def _rule_shape(p):
+    if isinstance(p.get('fill_value'), (str, bytes)):
+        forbid('np.full with a string fill value is not available in the sandbox')
+    return _shape_count(p.get('shape', 0))
+
+
+def _rule_like(p):
+    shape = p.get('shape')
+    return _size(p.get('a')) if shape is None else _shape_count(shape)
+
+
+def _rule_arange(p, args, kwargs):
+    first = args[0] if args else kwargs.get('start')
+    stop = args[1] if len(args) > 1 else kwargs.get('stop')
+    step = args[2] if len(args) > 2 else kwargs.get('step')
+    if len(args) > 3:
+        check_dtype(args[3], 'np.arange')
+    start = 0 if stop is None else first
+    stop = first if stop is None else stop
+    step = 1 if step is None else step
     if stop is None or step == 0:
         return 0
     return max(int(math.ceil((float(stop) - float(start)) / float(step))), 0)
 
 
-def _rule_linspace(args, kwargs):
-    return int(kwargs.get('num', args[2] if len(args) > 2 else 50))
+def _rule_linspace(p):
+    num = operator.index(p.get('num', 50))
+    return num * max(_broadcast_count(p.get('start'), p.get('stop')), 1)
 
 
-def _rule_eye(args, kwargs):
-    rows = int(kwargs.get('N', args[0] if args else 1))
-    cols = kwargs.get('M', args[1] if len(args) > 1 else None)
-    return rows * (rows if cols is None else int(cols))
+def _rule_eye(p):
+    rows = operator.index(p.get('N', p.get('n', 1)))
+    cols = p.get('M')
+    return rows * (rows if cols is None else operator.index(cols))
 
 
-def _rule_input(args, kwargs):
-    return _array_size_estimate(args[0]) if args else 0
+def _rule_input(p):
+    return _size(p.get('object', p.get('a')))
 
 
-def _rule_join(args, kwargs):
-    seq = args[0] if args else kwargs.get('arrays', ())
-    return sum(_array_size_estimate(item) for item in seq)
+def _rule_join(p):
+    return sum(_size(item) for item in p.get('arrays', p.get('tup', ())))
 
 
-def _rule_outer(args, kwargs):
-    return _array_size_estimate(args[0]) * _array_size_estimate(args[1]) if len(args) > 1 else 0
+def _rule_outer(p):
+    return _size(p.get('a')) * _size(p.get('b'))
 
 
-def _rule_tile(args, kwargs):
-    reps = args[1] if len(args) > 1 else kwargs.get('reps', 1)
-    return _array_size_estimate(args[0]) * _shape_count(reps)
+def _rule_tile(p):
+    return _size(p.get('A')) * _shape_count(p.get('reps', 1))
 
 
-def _rule_repeat(args, kwargs):
-    repeats = args[1] if len(args) > 1 else kwargs.get('repeats', 1)
-    return _array_size_estimate(args[0]) * int(numpy.max(repeats) if numpy.size(repeats) else 0)
+def _repeat_count(repeats):
+    return int(numpy.max(repeats)) if numpy.size(repeats) else 0
 
 
-def _rule_meshgrid(args, kwargs):
-    return math.prod(_array_size_estimate(a) for a in args) * max(len(args), 1)
+def _rule_repeat(p):
+    return _size(p.get('a')) * _repeat_count(p.get('repeats', 1))
 
 
-def _rule_matmul(args, kwargs):
-    if len(args) > 1:
-        _matmul_check(numpy.asarray(args[0]), numpy.asarray(args[1]))
+def _rule_meshgrid(p, args, kwargs):
+    return math.prod(_size(a) for a in args) * max(len(args), 1)
+
+
+def _rule_matmul(p):
+    a, b = p.get('a', p.get('x1')), p.get('b', p.get('x2'))
+    if a is not None and b is not None:
+        _matmul_check(numpy.asarray(a), numpy.asarray(b))
     return 0
 
 
-def _rule_choice(args, kwargs):
-    return _rule_size_kw(args, kwargs, position=1)
+def _rule_diff(p):
+    n = operator.index(p.get('n', 1))
+    if n > _size(p.get('a')):  # numpy loops n times in Python, out of the tracer's sight
+        forbid(f'np.diff with n={n} larger than the array is not available in the sandbox')
+    return 0
 
 
-def _rule_uniform(args, kwargs):
-    return _rule_size_kw(args, kwargs, position=2)
+def _rule_shape_args(p, args, kwargs):
+    """np.random.rand(2, 3) style: every positional argument is a dimension."""
+    return math.prod(operator.index(d) for d in args) if args else 1
 
 
-def _rule_randint(args, kwargs):
-    return _rule_size_kw(args, kwargs, position=2)
+def _rule_size(p):
+    return _shape_count(p.get('size'))
+
+
+def _rule_distribution(p):
+    if p.get('size') is not None:
+        return _shape_count(p['size'])
+    return _broadcast_count(p.get('loc', p.get('low')), p.get('scale', p.get('high')))
+
+
+def _rule_choice(p):
+    population = p.get('a')
+    if p.get('replace', True) is False:  # numpy permutes the whole population first
+        check_elements(operator.index(population) if isinstance(population, (int, numpy.integer))
+                       else _size(population), 'np.random.choice without replacement')
+    return _shape_count(p.get('size'))
 
 
 SIZE_RULES = {
     'zeros': _rule_shape, 'ones': _rule_shape, 'empty': _rule_shape, 'full': _rule_shape,
-    'arange': _rule_arange, 'linspace': _rule_linspace, 'eye': _rule_eye, 'identity': _rule_eye,
+    'zeros_like': _rule_like, 'ones_like': _rule_like,
+    'linspace': _rule_linspace, 'eye': _rule_eye, 'identity': _rule_eye,
     'array': _rule_input, 'asarray': _rule_input,
     'concatenate': _rule_join, 'stack': _rule_join, 'vstack': _rule_join, 'hstack': _rule_join,
     'column_stack': _rule_join,
     'outer': _rule_outer, 'kron': _rule_outer, 'tile': _rule_tile, 'repeat': _rule_repeat,
-    'meshgrid': _rule_meshgrid, 'dot': _rule_matmul, 'matmul': _rule_matmul,
-    'rand': _rule_shape_args, 'randn': _rule_shape_args, 'random': _rule_size_kw, 'normal': _rule_uniform,
-    'uniform': _rule_uniform, 'randint': _rule_randint, 'choice': _rule_choice,
+    'dot': _rule_matmul, 'matmul': _rule_matmul, 'diff': _rule_diff,
+    'random': _rule_size, 'normal': _rule_distribution, 'uniform': _rule_distribution,
+    'randint': _rule_distribution, 'choice': _rule_choice,
 }
+# Rules that need the raw arguments (variadic or position-dependent signatures).
+RAW_SIZE_RULES = {'arange': _rule_arange, 'meshgrid': _rule_meshgrid, 'rand': _rule_shape_args,
+                  'randn': _rule_shape_args}
 
 
 # Cubic-time linear algebra: inputs are kept small so a single call stays well under a second.
@@ -561,33 +808,56 @@ MATRIX_FUNCTIONS = frozenset({'inv', 'det', 'solve', 'pinv', 'eig', 'svd'})
 MAX_MATRIX_ELEMENTS = 250_000
 
 
+def _merge(names, args, kwargs):
+    merged = dict(zip(names, args))
+    merged.update(kwargs)
+    return merged
+
+
 def wrap_numpy_function(name, function):
     """NumPy function for generated code: result size checked before the call; array arguments broadcast-checked."""
     rule = SIZE_RULES.get(name)
+    raw_rule = RAW_SIZE_RULES.get(name)
+    names = PARAMETERS.get(name, ())
     cubic = name in MATRIX_FUNCTIONS
+    is_type = isinstance(function, type)  # np.float64(...) and friends
 
     def call(*args, **kwargs):
         if cubic and args and _array_size_estimate(args[0]) > MAX_MATRIX_ELEMENTS:
             refuse(f'np.linalg.{name} on more than {MAX_MATRIX_ELEMENTS:,} elements is not allowed in the sandbox')
+        merged = _merge(names, args, kwargs)
+        check_dtype(merged.get('dtype'), f'np.{name}')
+        if is_type and args and isinstance(args[0], (str, bytes)):
+            forbid(f'np.{name} of a string is not available in the sandbox')
         if rule is not None:
-            check_elements(rule(args, kwargs), f'np.{name}')
-        arrays = [a for a in args if isinstance(a, _ARRAYS)]
-        if len(arrays) >= 2 and rule is None:
-            try:
-                shape = numpy.broadcast_shapes(*(a.shape for a in arrays))
-                check_elements(math.prod(shape), f'np.{name}')
-            except ValueError:
-                pass
+            check_elements(rule(merged), f'np.{name}')
+        elif raw_rule is not None:
+            check_elements(raw_rule(merged, args, kwargs), f'np.{name}')
+        else:
+            arrays = [a for a in itertools.chain(args, kwargs.values()) if isinstance(a, _ARRAYS)]
+            if len(arrays) >= 2:
+                check_elements(_broadcast_count(*arrays), f'np.{name}')
         return function(*args, **kwargs)
     return call
+
+
+def _coordinate_count(value):
+    """Coordinates a constructor copies: geometries inside a list count with all their coordinates."""
+    if isinstance(value, BaseGeometry):
+        return int(shapely.get_num_coordinates(value))
+    if isinstance(value, (list, tuple)):
+        return sum(_coordinate_count(item) if isinstance(item, (BaseGeometry, list, tuple)) else 1
+                   for item in value)
+    return _array_size_estimate(value)
 
 
 def wrap_geometry_function(name, function):
     """Shapely constructors and functions: coordinate lists are bounded like sequences."""
     def call(*args, **kwargs):
-        for arg in args:
+        for arg in itertools.chain(args, kwargs.values()):
             size = _len_or_none(arg) if not isinstance(arg, (str, bytes)) else None
             if size is not None:
                 check_length(size, name)
+                check_elements(_coordinate_count(arg), name)
         return function(*args, **kwargs)
     return call

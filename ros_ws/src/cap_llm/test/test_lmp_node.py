@@ -126,6 +126,7 @@ def test_unknown_object_is_an_error_naming_it_and_the_next_command_works(graph):
     assert outcome.status == GoalStatus.STATUS_ABORTED
     assert not outcome.result.success
     assert "'purple block'" in outcome.result.message and 'red block' in outcome.result.message
+    assert wait_for(lambda: graph.final(outcome.result.command_id) is not None)
     assert graph.final(outcome.result.command_id).stage == StatusEvent.STAGE_ERROR
     again = graph.run('which blocks are there')
     assert again.result.success and again.status == GoalStatus.STATUS_SUCCEEDED
@@ -135,6 +136,7 @@ def test_unsafe_code_is_refused_before_it_runs(graph, tmp_path):
     outcome = graph.run('delete your files')
     assert not outcome.result.success
     assert 'import' in outcome.result.message
+    assert wait_for(lambda: graph.final(outcome.result.command_id) is not None)
     assert graph.final(outcome.result.command_id).stage == StatusEvent.STAGE_REFUSED
     assert graph.run('which blocks are there').result.success
 
