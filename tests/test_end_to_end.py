@@ -74,10 +74,8 @@ def test_cap_stop_halts_the_arm_within_half_a_second_of_simulated_time(ros_conte
     world = graph.graph.world
     try:
         result = graph.send('stack all the blocks')
-        # Wait until the arm moves fast, in the middle of the program.
+        # Stop as soon as the arm moves fast, in the middle of a motion of the program.
         assert _wait(lambda: np.max(np.abs(world.joint_velocities())) > 0.3)
-        time.sleep(0.3)
-        assert np.max(np.abs(world.joint_velocities())) > 0.05
         stop_time = world.time
         graph.stop.publish(Empty())
         halted = {}
