@@ -6,22 +6,20 @@ path. Their success rate measures the robot stack alone.
 """
 from __future__ import annotations
 
+import numpy as np
+
 from cap_bench import table
 from cap_bench.episodes import MAGNITUDE_DISTANCES, ORDINALS, Episode
-
-# Named positions in normalised table coordinates ([0, 0] bottom left, [1, 1] top right).
-NORMALISED_POSITIONS = {
-    'top left corner': (0.0, 1.0), 'top side': (0.5, 1.0), 'top right corner': (1.0, 1.0),
-    'left side': (0.0, 0.5), 'middle': (0.5, 0.5), 'right side': (1.0, 0.5),
-    'bottom left corner': (0.0, 0.0), 'bottom side': (0.5, 0.0), 'bottom right corner': (1.0, 0.0),
-}
+from cap_llm.tabletop import NORMALISED_ORIGIN, NORMALISED_SPAN
 
 _BLOCKS = "block_names = [name for name in get_obj_names() if name.endswith('block')]\n"
 _BOWLS = "bowl_names = [name for name in get_obj_names() if name.endswith('bowl')]\n"
 
 
 def _position(name: str) -> str:
-    return f'denormalize_xy({list(NORMALISED_POSITIONS[name])})'
+    """The named position as generated code would write it, in normalised table coordinates."""
+    normalised = (np.array(table.NAMED_POSITIONS[name]) - NORMALISED_ORIGIN) / NORMALISED_SPAN
+    return f'denormalize_xy({[float(v) for v in normalised]})'
 
 
 def _unit(direction: str) -> str:

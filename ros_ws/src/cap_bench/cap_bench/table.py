@@ -1,22 +1,11 @@
 """Facts of the table-top scene the benchmark is defined on (world frame, metres; "top" is +y, "left" is -x)."""
 from __future__ import annotations
 
-COLORS = ('blue', 'red', 'green', 'orange', 'yellow', 'purple', 'pink', 'cyan', 'brown', 'gray')
+from cap_llm import tabletop
 
-# Named positions on the table surface (z = 0).
-CORNERS: dict[str, tuple[float, float]] = {
-    'top left corner': (-0.25, -0.25),
-    'top right corner': (0.25, -0.25),
-    'bottom left corner': (-0.25, -0.75),
-    'bottom right corner': (0.25, -0.75),
-}
-SIDES: dict[str, tuple[float, float]] = {
-    'top side': (0.0, -0.25),
-    'left side': (-0.25, -0.5),
-    'right side': (0.25, -0.5),
-    'bottom side': (0.0, -0.75),
-    'middle': (0.0, -0.5),
-}
+# Named positions on the table surface (z = 0): the ones the robot API of generated code knows.
+CORNERS: dict[str, tuple[float, float]] = dict(tabletop.CORNERS)
+SIDES: dict[str, tuple[float, float]] = {**tabletop.SIDES, 'middle': tabletop.MIDDLE}
 NAMED_POSITIONS = {**CORNERS, **SIDES}
 
 # Unit vectors of the four directions in the table plane.

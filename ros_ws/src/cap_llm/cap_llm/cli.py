@@ -22,8 +22,6 @@ from typing import Callable, Sequence
 
 EXIT_OK, EXIT_FAILED, EXIT_UNREACHABLE = 0, 1, 2
 
-STAGE_NAMES = {0: 'received', 1: 'generating', 2: 'code', 3: 'executing', 4: 'done', 5: 'error', 6: 'cancelled',
-               7: 'refused'}
 
 
 def _spin_until(executor, predicate: Callable[[], bool], timeout: float) -> bool:
@@ -67,6 +65,8 @@ def send(command: str, server_timeout: float, timeout: float, out=sys.stdout) ->
     client = ActionClient(session.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
     session.node.create_subscription(String, GraphNames.SAY_TOPIC, lambda m: print(f'robot says: {m.data}',
                                                                                    file=out, flush=True), 10)
+    stage_names = {getattr(StatusEvent, name): name[len('STAGE_'):].lower()
+                   for name in dir(StatusEvent) if name.startswith('STAGE_')}
     last_stage: list[int] = []
     goal_handle = None
 
@@ -79,7 +79,7 @@ def send(command: str, server_timeout: float, timeout: float, out=sys.stdout) ->
             print('code:\n' + '\n'.join('    ' + line for line in status.code.splitlines()), file=out, flush=True)
         else:
             detail = f': {status.message}' if status.message else ''
-            print(f'[{STAGE_NAMES.get(status.stage, status.stage)}]{detail}', file=out, flush=True)
+            print(f'[{stage_names.get(status.stage, status.stage)}]{detail}', file=out, flush=True)
 
     try:
         if not client.wait_for_server(timeout_sec=server_timeout):
