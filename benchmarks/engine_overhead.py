@@ -7,6 +7,9 @@ generated function, rewrite and compile, sandbox setup and execution including t
 (each with its own prompt, check and execution), against an in-memory table. The session is reset before every
 command so each one pays the same work.
 
+It measures the same command twice: with the engine in this process, and through IsolatedEngine, as lmp_node runs
+it (the session in a sandbox process; robot API calls and engine events cross a socket as JSON messages).
+
     source scripts/env.sh && python benchmarks/engine_overhead.py [--n 300]
 """
 from __future__ import annotations
@@ -75,6 +78,39 @@ def stop_overshoot_ms(runs: int = 5, limit_s: float = 0.2) -> float:
     return statistics.median(overshoots)
 
 
+def summary(values: list[float]) -> dict[str, float]:
+    return {'p50': round(percentile(values, 50), 3), 'p90': round(percentile(values, 90), 3),
+            'p99': round(percentile(values, 99), 3), 'mean': round(statistics.mean(values), 3)}
+
+
+def isolated_overhead_ms(path: Path, n: int, warmup: int) -> dict:
+    """Overhead per command through IsolatedEngine: wall time of run() minus the model time the sandbox reports."""
+    from cap_llm.isolated_engine import IsolatedEngine
+
+    current = {'table': Table.with_objects(SCENE)}
+
+    def bound(name: str):
+        return lambda *args, **kwargs: getattr(current['table'], name)(*args, **kwargs)
+
+    api = {name: bound(name) for name in current['table'].api()}
+    engine = IsolatedEngine(api, {'cassette': str(path)})
+    overhead_ms = []
+    try:
+        for i in range(warmup + n):
+            current['table'] = Table.with_objects(SCENE)
+            engine.reset()
+            started = time.perf_counter()
+            result = engine.run(COMMAND)
+            wall = time.perf_counter() - started
+            if not result.success:
+                raise SystemExit(f'benchmark command failed in the sandbox process: {result.message}')
+            if i >= warmup:
+                overhead_ms.append((wall - result.timings['model_s']) * 1000)
+    finally:
+        engine.close()
+    return summary(overhead_ms)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--n', type=int, default=300, help='measured commands')
@@ -103,6 +139,7 @@ def main() -> None:
                 calls = result.model_calls
         moved = all(abs(table.get_obj_pos(f'{c} block') - table.get_obj_pos(f'{c} bowl')).max() < 1e-9
                     for c in ('blue', 'red', 'green', 'yellow'))
+        isolated = isolated_overhead_ms(path, args.n, args.warmup)
     prompt = load_prompt('tabletop_ui')
     print(json.dumps({
         'benchmark': 'engine_overhead',
@@ -112,8 +149,8 @@ def main() -> None:
                      f'({calls} model calls per command, answered by a replay cassette) against an in-memory table'),
         'command': COMMAND,
         'n': args.n,
-        'overhead_ms': {'p50': round(percentile(overhead_ms, 50), 3), 'p90': round(percentile(overhead_ms, 90), 3),
-                        'p99': round(percentile(overhead_ms, 99), 3), 'mean': round(statistics.mean(overhead_ms), 3)},
+        'overhead_ms': summary(overhead_ms),
+        'overhead_ms_sandbox_process': isolated,
         'execute_ms_p50': round(percentile(execute_ms, 50), 3),
         'model_ms_p50': round(percentile(model_ms, 50), 3),
         'total_ms_p50': round(percentile(total_ms, 50), 3),
@@ -123,7 +160,7 @@ def main() -> None:
         'infinite_loop_stop_after_limit_ms_p50': round(stop_overshoot_ms(), 3),
         'load_average_1min': round(os.getloadavg()[0], 2),
         'target': 'overhead p50 <= 5 ms',
-        'target_met': percentile(overhead_ms, 50) <= 5.0,
+        'target_met': percentile(overhead_ms, 50) <= 5.0 and isolated['p50'] <= 5.0,
     }, indent=2))
 
 

@@ -387,6 +387,9 @@ class Engine:
             result.message = str(error)
             if isinstance(error, ExecutionStopped):
                 result.stop_reason = error.reason
+        elif isinstance(error, MemoryError):
+            result.error_type = 'MemoryError'
+            result.message = 'MemoryError: the program ran out of memory'
         else:
             result.error_type = type(error).__name__
             result.message = f'{type(error).__name__}: {bounded_exception_text(error)}'

@@ -53,3 +53,24 @@ class CassetteMissError(LLMError):
         super().__init__(f'the cassette {path} has no answer for LMP {lmp!r} and query {query!r}')
         self.lmp = lmp
         self.query = query
+
+
+class RobotApiError(RuntimeError):
+    """A robot API call failed: unknown object, unreachable target, a service that does not answer..."""
+
+
+class StoppedError(RobotApiError):
+    """The program was stopped (/cap/stop or a cancelled /cap/execute goal) while it waited for the robot."""
+
+
+class SandboxProcessLost(SandboxError):
+    """The process that ran the session's programs died or was killed; the session is lost.
+
+    `reason`: 'crashed' (the interpreter died, e.g. a C stack overflow), 'stalled' (one operation held the
+    interpreter past the stall limit), 'memory' (the address-space limit was hit) or 'cancelled' (a stop was not
+    honoured within the grace period).
+    """
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason

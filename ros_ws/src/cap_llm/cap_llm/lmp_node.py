@@ -26,6 +26,7 @@ from cap_interfaces.msg import GraphNames, StatusEvent
 from cap_llm import engine as engine_module
 from cap_llm.cassette import make_client
 from cap_llm.command_queue import CommandQueue, Job
+from cap_llm.isolated_engine import IsolatedEngine
 from cap_llm.ros_robot_api import RosTabletopApi
 from cap_llm.sandbox import SandboxLimits
 from cap_llm.tabletop import build_tabletop_engine
@@ -66,15 +67,21 @@ class LmpNode(Node):
         if domain != 'tabletop':
             raise ValueError(f'parameter domain={domain!r}: only "tabletop" exists so far')
 
+        isolated = self._parameter('sandbox_process', True, 'Run generated programs in a sandbox process of their '
+                                   'own (a crash or a stuck C call then costs the session, not the node); false: '
+                                   'in this process (faster to start, for debugging).')
+        stall_limit = self._parameter('stall_limit_s', 10.0, 'With sandbox_process: kill the sandbox process when '
+                                      'one operation holds it this long without a pause [s].')
+
         http_options: dict[str, Any] = {'timeout_s': request_timeout, 'api': api}
         if base_url:
             http_options['base_url'] = base_url
         if model:
             http_options['model'] = model
         if backend == 'cassette':
-            client = make_client(cassette=cassette)
+            client_options: dict[str, Any] = {'cassette': cassette}
         elif backend == 'http':
-            client = make_client(cassette=cassette if record else None, record=record, **http_options)
+            client_options = {'cassette': cassette if record else None, 'record': record, **http_options}
         else:
             raise ValueError(f'parameter llm_backend={backend!r} is not one of cassette, http')
 
@@ -82,7 +89,12 @@ class LmpNode(Node):
         self._status_publisher = self.create_publisher(StatusEvent, GraphNames.STATUS_TOPIC, EVENT_QOS)
         say_publisher = self.create_publisher(String, GraphNames.SAY_TOPIC, EVENT_QOS)
         self.robot = RosTabletopApi(self, say_publisher, service_timeout, motion_timeout)
-        self.engine = build_tabletop_engine(self.robot.functions(), client, SandboxLimits(time_limit_s=time_limit))
+        limits = SandboxLimits(time_limit_s=time_limit)
+        if isolated:
+            self.engine = IsolatedEngine(self.robot.functions(), client_options, limits, domain=domain,
+                                         stall_limit_s=stall_limit)
+        else:
+            self.engine = build_tabletop_engine(self.robot.functions(), make_client(**client_options), limits)
         self.engine.add_listener(self._on_engine_event)
         self.queue = CommandQueue(max_queued)
         self._current: Job | None = None
@@ -100,7 +112,9 @@ class LmpNode(Node):
                                     callback_group=ReentrantCallbackGroup())
         self._worker = threading.Thread(target=self._work, name='lmp_worker', daemon=True)
         self._worker.start()
-        self.get_logger().info(f'ready: LLM backend {backend}' + (f' ({cassette})' if backend == 'cassette' else ''))
+        where = f'sandbox process {self.engine.pid}' if isolated else 'in-process sandbox'
+        self.get_logger().info(f'ready: LLM backend {backend}' + (f' ({cassette})' if backend == 'cassette' else '')
+                               + f', {where}')
 
     def _parameter(self, name: str, default: Any, description: str) -> Any:
         return self.declare_parameter(name, default, ParameterDescriptor(description=description)).value
@@ -251,6 +265,9 @@ class LmpNode(Node):
     def destroy_node(self) -> None:
         self.queue.close()
         self._stop_running()
+        close = getattr(self.engine, 'close', None)
+        if close is not None:
+            close()
         super().destroy_node()
 
 

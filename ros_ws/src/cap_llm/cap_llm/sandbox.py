@@ -55,15 +55,15 @@ What it guarantees
   The engine's report of a program's exception and the sandbox's print() are built with bounded work
   (`bounded_text`, `bounded_exception_text`: reprlib, at most 10,000 characters).
 
-What it does not guarantee
-- It is not an OS boundary: a bug in CPython, NumPy or Shapely reachable with allowed values is not contained;
-  run untrusted models in a separate process or container for that. Known instances: C recursion over a deeply
-  nested value built by a loop (`t = (t,)` 300,000 times, then `hash(t)`, `str(t)` or `t == t`) overflows the C
-  stack and kills the process; only process isolation bounds it.
+What it does not guarantee (in process; IsolatedEngine, which lmp_node uses, runs the sandbox in a process of
+its own and bounds the first two: a dead process costs the session, a silent one is killed after `stall_limit_s`)
+- It is not an OS boundary: a bug in CPython, NumPy or Shapely reachable with allowed values is not contained.
+  Known instances: C recursion over a deeply nested value built by a loop (`t = (t,)` 300,000 times, then
+  `hash(t)`, `str(t)` or `t == t`) overflows the C stack and kills the process.
 - Quadratic C work on aliased data is not bounded: `str([row] * 1000)` with a million-element `row`, hashing or
   comparing tuples that repeat one long tuple, `list.count` over aliased long lists, a set of integers with one
   hash. Every input stays within the size limits, the single C call runs for minutes or hours and is not
-  interrupted; only a separate process with a kill timer bounds it.
+  interrupted.
 - C-level work inside a single allowed call is not interrupted (e.g. sorting a million long strings, a NumPy
   reduction over a large array); the size limits keep such calls to seconds, but a robot API call that blocks is
   only checked when it returns.

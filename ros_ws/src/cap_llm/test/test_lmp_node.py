@@ -25,6 +25,10 @@ PROGRAMS = {
     'count forever': 'n = 0\nwhile True:\n    n += 1',
     'remember the red block': "chosen = 'red block'",
     'say what you remembered': 'say(chosen)',
+    # Overflows the C stack when hashed: only the sandbox process dies.
+    'crash the interpreter': 't = ()\nfor i in range(300000):\n    t = (t,)\nh = hash(t)',
+    # One C call that runs for hours: the sandbox process stops sending heartbeats and is killed.
+    'stall the interpreter': 'row = [0] * 10 ** 6\ns = str([row] * 1000)',
 }
 
 
@@ -57,7 +61,8 @@ class Graph:
         self.perception = PerceptionNode(context=context, parameter_overrides=[
             Parameter('source', value='stub'), Parameter('stub_file', value=str(stub))])
         self.lmp = LmpNode(context=context, parameter_overrides=[
-            Parameter('cassette', value=str(cassette)), Parameter('time_limit_s', value=20.0)])
+            Parameter('cassette', value=str(cassette)), Parameter('time_limit_s', value=60.0),
+            Parameter('stall_limit_s', value=3.0)])
         self.user = Node('user', context=context)
         self.statuses, self.said, self.code = [], [], []
         self.user.create_subscription(StatusEvent, GraphNames.STATUS_TOPIC, self.statuses.append, EVENT_QOS)
@@ -178,3 +183,17 @@ def test_the_session_remembers_until_it_is_reset(graph):
     assert wait_for(future.done) and future.result().success
     forgotten = graph.run('say what you remembered')
     assert not forgotten.result.success and 'chosen' in forgotten.result.message
+
+
+@pytest.mark.parametrize('command, cause', [('crash the interpreter', 'died (killed by SIGSEGV)'),
+                                            ('stall the interpreter', 'stopped responding')])
+def test_a_program_that_kills_its_interpreter_costs_the_session_not_the_node(graph, command, cause):
+    assert graph.run('remember the red block').result.success
+    lost = graph.run(command, timeout=120.0)
+    assert lost.status == GoalStatus.STATUS_ABORTED and not lost.result.success
+    assert cause in lost.result.message and 'session was lost' in lost.result.message
+    assert wait_for(lambda: graph.final(lost.result.command_id) is not None)
+    assert graph.final(lost.result.command_id).stage == StatusEvent.STAGE_ERROR
+    forgotten = graph.run('say what you remembered')
+    assert not forgotten.result.success and 'chosen' in forgotten.result.message
+    assert graph.run('which blocks are there').result.success

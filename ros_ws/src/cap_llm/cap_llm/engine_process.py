@@ -1,0 +1,165 @@
+"""The sandbox process: one session's Engine, scope and generated code, apart from lmp_node.
+
+Started by IsolatedEngine (isolated_engine.py) as `python -m cap_llm.engine_process <data fd> <control fd>` with
+one end of two socket pairs. On the data socket, the first message is the setup (robot API names, LLM client
+options, sandbox limits, address-space limit); then the parent sends run / reset / close and the replies to the robot
+API calls this process makes, and this process sends engine events, API calls, the result of each run, and a
+heartbeat every HEARTBEAT_S while it can run Python: a C call that holds the interpreter (a pathological hash, a
+quadratic repr) silences it, and the parent kills us. The main thread reads the data socket itself, also for the
+reply to an API call (a hand-off between threads would cost about a millisecond per call). The control socket
+carries only cancel; a thread of its own watches it, and its closing means the parent is gone.
+
+No rclpy here: the robot lives in the parent, behind the `call` messages.
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import os
+import resource
+import sys
+import threading
+from multiprocessing.connection import Connection
+from typing import Any, Callable
+
+from cap_llm import wire
+from cap_llm.errors import RobotApiError, StoppedError
+
+HEARTBEAT_S = 0.25
+# Exception types a robot API error may arrive as; anything else arrives as RobotApiError.
+_API_ERRORS: dict[str, type[Exception]] = {
+    'RobotApiError': RobotApiError, 'StoppedError': StoppedError, 'ValueError': ValueError,
+    'TypeError': TypeError, 'KeyError': KeyError, 'IndexError': IndexError, 'RuntimeError': RuntimeError,
+}
+
+
+class _Channel:
+    """The data socket to the parent: sends from several threads; the main thread receives."""
+
+    def __init__(self, connection: Connection) -> None:
+        self._connection = connection
+        self._send_lock = threading.Lock()
+        self._ids = itertools.count(1)
+        self.waiting_for_parent = threading.Event()  # an API call is out: the parent is busy, not us
+
+    def send(self, message: dict[str, Any]) -> None:
+        data = wire.encode(message)
+        with self._send_lock:
+            self._connection.send_bytes(data)
+
+    def receive(self) -> dict[str, Any]:
+        return wire.decode(self._connection.recv_bytes(wire.MAX_MESSAGE_BYTES))
+
+    def call(self, name: str, args: tuple, kwargs: dict) -> Any:
+        call_id = next(self._ids)
+        try:
+            self.send({'op': 'call', 'id': call_id, 'name': name, 'args': list(args), 'kwargs': kwargs})
+        except wire.WireError as error:
+            raise TypeError(f'{name}: {error}') from None
+        self.waiting_for_parent.set()
+        try:
+            reply = self.receive()
+        except (EOFError, OSError, wire.WireError):
+            os._exit(0)  # the parent is gone (or spoke nonsense): nothing here is worth keeping
+        finally:
+            self.waiting_for_parent.clear()
+        if reply.get('op') != 'reply' or reply.get('id') != call_id:
+            raise RobotApiError(f'{name}: the robot answered out of turn')
+        error = reply.get('error')
+        if error:
+            raise _API_ERRORS.get(str(error.get('type')), RobotApiError)(str(error.get('message', '')))
+        return reply.get('value')
+
+
+def _proxy(channel: _Channel, name: str) -> Callable[..., Any]:
+    def call_robot(*args: Any, **kwargs: Any) -> Any:
+        return channel.call(name, args, kwargs)
+    call_robot.__name__ = name
+    return call_robot
+
+
+def _limit_address_space(extra_bytes: int) -> None:
+    """Cap virtual memory at what is mapped now plus `extra_bytes`: a runaway allocation fails with MemoryError."""
+    if extra_bytes <= 0:
+        return
+    with open('/proc/self/status', encoding='ascii') as status:
+        mapped = next(int(line.split()[1]) * 1024 for line in status if line.startswith('VmSize:'))
+    limit = mapped + extra_bytes
+    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+
+def _build_engine(setup: dict[str, Any], channel: _Channel):
+    from cap_llm.cassette import make_client
+    from cap_llm.sandbox import SandboxLimits
+    from cap_llm.tabletop import build_tabletop_engine
+
+    if setup.get('domain', 'tabletop') != 'tabletop':
+        raise ValueError(f"unknown domain {setup.get('domain')!r}")
+    client = make_client(**setup.get('client', {}))
+    limits = SandboxLimits(**setup.get('limits', {}))
+    api = {name: _proxy(channel, name) for name in setup['api']}
+    return build_tabletop_engine(api, client, limits)
+
+
+def serve(connection: Connection, control: Connection) -> None:
+    channel = _Channel(connection)
+    setup = channel.receive()
+    engine = _build_engine(setup, channel)
+    engine.add_listener(lambda event: channel.send({'op': 'event', **dataclasses.asdict(event)}))
+    _limit_address_space(int(setup.get('address_space_extra_bytes', 0)))
+    stopped = threading.Event()
+    busy = threading.Event()  # a request is being handled: the parent is listening for heartbeats
+
+    def watch_control() -> None:
+        try:
+            while True:
+                if wire.decode(control.recv_bytes(1024)).get('op') == 'cancel':
+                    engine.cancel()
+        except (EOFError, OSError, wire.WireError):
+            pass
+        finally:  # the parent is gone
+            stopped.set()
+            os._exit(0)
+
+    def beat() -> None:
+        while not stopped.wait(HEARTBEAT_S):
+            if busy.is_set() and not channel.waiting_for_parent.is_set():
+                channel.send({'op': 'alive'})
+
+    threading.Thread(target=watch_control, name='engine_process_control', daemon=True).start()
+    threading.Thread(target=beat, name='engine_process_heartbeat', daemon=True).start()
+    channel.send({'op': 'ready', 'default_lmp': engine.default_lmp})
+    while True:
+        try:
+            message = channel.receive()
+        except (EOFError, OSError, wire.WireError):
+            os._exit(0)
+        op = message.get('op')
+        busy.set()
+        if op == 'run':
+            result = dataclasses.asdict(engine.run(str(message.get('command', ''))))
+            try:
+                channel.send({'op': 'result', 'result': result})
+            except wire.WireError:  # a huge answer from the model: report without the code
+                result['code'] = result['code'][:100_000]
+                channel.send({'op': 'result', 'result': result})
+        elif op == 'reset':
+            engine.reset()
+            channel.send({'op': 'reset_done'})
+        elif op == 'close':
+            os._exit(0)
+        busy.clear()
+
+
+def main() -> None:
+    connection, control = Connection(int(sys.argv[1])), Connection(int(sys.argv[2]))
+    # Output of the process goes to the parent's stderr; stdout stays free of stray prints.
+    sys.stdout = sys.stderr
+    try:
+        serve(connection, control)
+    except MemoryError:
+        os._exit(3)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,173 @@
+"""IsolatedEngine: the session runs in a sandbox process, the robot stays here.
+
+The model is a real HTTP server on 127.0.0.1 (the sandbox process talks to it itself); the robot is the in-memory
+table, called through the message channel. The C-level pathologies the in-process sandbox cannot bound (see
+sandbox.py, "What it does not guarantee") end the sandbox process here, never the host.
+"""
+from __future__ import annotations
+
+import os
+import threading
+
+import numpy as np
+import pytest
+
+from cap_llm import wire
+from cap_llm.engine import CODE, DONE, ERROR, EXECUTING, GENERATING
+from cap_llm.isolated_engine import IsolatedEngine
+from cap_llm.sandbox import SandboxLimits
+from cap_llm.testing.openai_server import ScriptedOpenAIServer
+from cap_llm.testing.table import Table
+
+SCENE = {'red block': (-0.1, -0.4), 'blue block': (0.1, -0.45), 'red bowl': (-0.15, -0.65)}
+PROGRAMS = {
+    'put the red block in the red bowl': ("put_first_on_second('red block', 'red bowl')\n"
+                                          "where = get_obj_pos('red block')\nsay(where)"),
+    'say where it went': 'say(where * 2)',
+    'move the purple block': "put_first_on_second('purple block', 'red bowl')",
+    'hand the robot a function': "put_first_on_second('red block', say)",
+    'count forever': 'n = 0\nwhile True:\n    n += 1',
+    'grow past the address space': 'row = [0] * 10 ** 6\nrows = [row * 1 for i in range(200)]',
+    'crash the interpreter': 't = ()\nfor i in range(300000):\n    t = (t,)\nh = hash(t)',
+    'ask the blocks': "blocks = parse_obj_name('the blocks', f'objects = {get_obj_names()}')\nsay(blocks)",
+    '# the blocks.': "ret_val = [name for name in objects if 'block' in name]",
+}
+# Quadratic C work on aliased data, each within the sandbox's size limits (test_sandbox_review.QUADRATIC_ATTEMPTS).
+QUADRATIC = {
+    'str of an aliased nested list': 'row = [0] * 10 ** 6\ns = str([row] * 1000)',
+    'hash of an aliased nested tuple': 't = (0,) * 10 ** 6\nh = hash((t,) * 20000)',
+    'list.count comparing long lists': 'a = [0] * 10 ** 6\nc = ([a] * 20000).count(list(a))',
+    'set of integers with one hash': 'xs = [i * (2 ** 61 - 1) for i in range(60000)]\ns = set(xs)',
+}
+
+
+@pytest.fixture
+def server():
+    with ScriptedOpenAIServer({**PROGRAMS, **QUADRATIC}) as scripted:
+        yield scripted
+
+
+@pytest.fixture
+def table() -> Table:
+    return Table.with_objects(SCENE)
+
+
+@pytest.fixture
+def engine(server, table):
+    isolated = IsolatedEngine(table.api(), {'base_url': server.base_url, 'model': 'scripted-model',
+                                            'timeout_s': 10.0},
+                              SandboxLimits(time_limit_s=60.0), stall_limit_s=2.0,
+                              address_space_extra_bytes=400 << 20)
+    yield isolated
+    isolated.close()
+
+
+def test_robot_calls_cross_the_boundary_and_the_session_keeps_variables(engine, table):
+    events = []
+    engine.add_listener(events.append)
+    first = engine.run('put the red block in the red bowl')
+    assert first.success, first.message
+    assert np.allclose(table.get_obj_pos('red block'), SCENE['red bowl'])
+    assert [(e.stage, e.lmp) for e in events] == [(GENERATING, 'tabletop_ui'), (CODE, 'tabletop_ui'),
+                                                   (EXECUTING, 'tabletop_ui'), (DONE, 'tabletop_ui')]
+    second = engine.run('say where it went')  # `where` is an ndarray that lives in the sandbox process
+    assert second.success, second.message
+    assert table.said == ['[-0.15 -0.65]', '[-0.3 -1.3]']
+    assert engine.pid != os.getpid()
+
+
+def test_a_nested_lmp_call_runs_in_the_sandbox_process(engine, table):
+    result = engine.run('ask the blocks')
+    assert result.success, result.message
+    assert table.said == ["['red block', 'blue block']"] and result.model_calls == 2
+
+
+def test_robot_errors_reach_the_program_with_their_message(engine):
+    unknown = engine.run('move the purple block')
+    assert not unknown.success
+    assert "'purple block'" in unknown.message and 'line 1' in unknown.message
+    bad_value = engine.run('hand the robot a function')
+    assert not bad_value.success
+    assert bad_value.error_type == 'TypeError' and 'cannot be passed to the robot' in bad_value.message
+    assert engine.run('put the red block in the red bowl').success
+
+
+def test_an_endless_loop_is_stopped_by_the_sandbox_and_the_process_stays(server, table):
+    quick = IsolatedEngine(table.api(), {'base_url': server.base_url, 'model': 'scripted-model'},
+                           SandboxLimits(time_limit_s=1.0))
+    try:
+        pid = quick.pid
+        result = quick.run('count forever')
+        assert not result.success and result.stop_reason == 'timeout', result.message
+        assert quick.pid == pid and quick.restarts == 0
+        assert quick.run('put the red block in the red bowl').success
+    finally:
+        quick.close()
+
+
+def test_cancel_stops_a_running_program(engine):
+    timer = threading.Timer(1.0, engine.cancel)
+    timer.start()
+    result = engine.run('count forever')
+    timer.join()
+    assert not result.success and result.stop_reason == 'cancelled'
+    assert engine.run('put the red block in the red bowl').success
+
+
+def test_running_out_of_address_space_is_a_memory_error_of_the_program(engine):
+    result = engine.run('grow past the address space')
+    assert not result.success
+    assert result.error_type == 'MemoryError' or result.stop_reason == 'memory', result.message
+    assert engine.run('put the red block in the red bowl').success
+
+
+def test_a_c_stack_overflow_costs_the_session_not_the_host(engine, table):
+    assert engine.run('put the red block in the red bowl').success
+    pid = engine.pid
+    crashed = engine.run('crash the interpreter')
+    assert not crashed.success and crashed.error_type == 'SandboxProcessLost' and crashed.stop_reason == 'crashed'
+    assert 'SIGSEGV' in crashed.message and 'session was lost' in crashed.message
+    assert engine.pid != pid and engine.restarts == 1
+    forgotten = engine.run('say where it went')
+    assert not forgotten.success and forgotten.error_type == 'NameError'
+    assert engine.run('put the red block in the red bowl').success
+
+
+@pytest.mark.parametrize('command', QUADRATIC)
+def test_quadratic_c_work_is_killed_as_a_stall(engine, command):
+    result = engine.run(command)
+    assert not result.success
+    assert result.stop_reason == 'stalled' and 'stopped responding' in result.message
+    assert engine.run('put the red block in the red bowl').success
+
+
+def test_reset_forgets_the_session(engine):
+    assert engine.run('put the red block in the red bowl').success
+    engine.reset()
+    assert engine.run('say where it went').error_type == 'NameError'
+
+
+def test_a_closed_engine_refuses_to_run(engine):
+    engine.close()
+    result = engine.run('put the red block in the red bowl')
+    assert not result.success and 'closed' in result.message
+
+
+@pytest.mark.parametrize('document', [
+    b'[1, 2]', b'{"op": ', b'\xff\xfe', b'{"x": {"__ndarray__": [[2], "|O", [1, 2]]}}',
+    b'{"x": {"__ndarray__": [[3], "<f8", [1, 2]]}}', b'{"x": {"__ndarray__": [[-1], "<f8", []]}}',
+    b'[' * 100000 + b']' * 100000,
+])
+def test_the_wire_refuses_anything_but_json_objects_and_numeric_arrays(document):
+    with pytest.raises(wire.WireError):
+        wire.decode(document)
+
+
+def test_the_wire_round_trips_arrays_and_bounds_what_it_sends():
+    message = wire.decode(wire.encode({'value': np.arange(6.0).reshape(2, 3), 'names': ('a', 'b'), 'n': np.int64(3)}))
+    assert message['value'].shape == (2, 3) and message['names'] == ['a', 'b'] and message['n'] == 3
+    row = list(range(1000))
+    with pytest.raises(wire.WireError):
+        wire.encode({'args': [row] * 1000})  # aliased: a million items to write
+    with pytest.raises(wire.WireError):
+        wire.encode({'args': [np.array(['text'])]})
