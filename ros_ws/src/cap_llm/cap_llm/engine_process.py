@@ -19,6 +19,7 @@ import os
 import resource
 import sys
 import threading
+import time
 from multiprocessing.connection import Connection
 from typing import Any, Callable
 
@@ -41,6 +42,7 @@ class _Channel:
         self._send_lock = threading.Lock()
         self._ids = itertools.count(1)
         self.waiting_for_parent = threading.Event()  # an API call is out: the parent is busy, not us
+        self.call_seconds: list[float] = []  # round trips as the program sees them, reported with each result
 
     def send(self, message: dict[str, Any]) -> None:
         data = wire.encode(message)
@@ -51,6 +53,7 @@ class _Channel:
         return wire.decode(self._connection.recv_bytes(wire.MAX_MESSAGE_BYTES))
 
     def call(self, name: str, args: tuple, kwargs: dict) -> Any:
+        started = time.perf_counter()
         call_id = next(self._ids)
         try:
             self.send({'op': 'call', 'id': call_id, 'name': name, 'args': list(args), 'kwargs': kwargs})
@@ -63,6 +66,7 @@ class _Channel:
             os._exit(0)  # the parent is gone (or spoke nonsense): nothing here is worth keeping
         finally:
             self.waiting_for_parent.clear()
+        self.call_seconds.append(time.perf_counter() - started)
         if reply.get('op') != 'reply' or reply.get('id') != call_id:
             raise RobotApiError(f'{name}: the robot answered out of turn')
         error = reply.get('error')
@@ -137,12 +141,14 @@ def serve(connection: Connection, control: Connection) -> None:
         op = message.get('op')
         busy.set()
         if op == 'run':
+            channel.call_seconds.clear()
             result = dataclasses.asdict(engine.run(str(message.get('command', ''))))
+            calls = channel.call_seconds[-10_000:]
             try:
-                channel.send({'op': 'result', 'result': result})
+                channel.send({'op': 'result', 'result': result, 'api_call_seconds': calls})
             except wire.WireError:  # a huge answer from the model: report without the code
                 result['code'] = result['code'][:100_000]
-                channel.send({'op': 'result', 'result': result})
+                channel.send({'op': 'result', 'result': result, 'api_call_seconds': calls})
         elif op == 'reset':
             engine.reset()
             channel.send({'op': 'reset_done'})

@@ -2,11 +2,15 @@
 
 `cap up`, the demo, the integration tests and the benchmark all start the graph through `bring_up`, so they run
 the same nodes with the same parameters (each package's config/*.yaml, then the overrides given here). Nodes are
-composed in one process on one multi-threaded executor spinning in a background thread; the simulator steps in its
-own thread.
+composed in one process; the simulator steps in its own thread. Two executors spin them, each in a thread:
+- a multi-threaded executor for the nodes whose callbacks block (action goals that last a whole motion or program);
+- an events executor (callbacks dispatched from C++, without a Python wait set rebuilt at every wake-up) for the
+  quick request-response path of generated code: perception's services and the robot API's clients. A robot API
+  call then never waits for the busy executor, neither for its request nor for its answer.
 """
 from __future__ import annotations
 
+import atexit
 import pathlib
 import threading
 from dataclasses import dataclass, field
@@ -14,7 +18,9 @@ from typing import Any
 
 import yaml
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
-from rclpy.executors import MultiThreadedExecutor
+import rclpy
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
 
 # (node name, package, its config file, module, class), in start order: the simulator first, lmp_node last.
@@ -24,6 +30,15 @@ NODES = (
     ('pick_place', 'cap_control', 'pick_place.yaml', 'cap_control.pick_place_node', 'PickPlaceNode'),
     ('lmp_node', 'cap_llm', 'lmp_node.yaml', 'cap_llm.lmp_node', 'LmpNode'),
 )
+
+
+def is_quick(node_name: str, parameters: dict[str, Any]) -> bool:
+    """Whether every callback of the node is quick, so that it may share the single-threaded events executor.
+
+    The RGB-D detector analyses frames in perception's callbacks, which would hold its services up on that one
+    thread: with that source perception stays on the multi-threaded executor.
+    """
+    return node_name == 'perception_node' and parameters.get('source', 'ground_truth') != 'rgbd'
 
 
 @dataclass
@@ -68,6 +83,46 @@ def config_parameters(package: str, filename: str) -> dict[str, dict[str, Any]]:
     return {node: dict((body or {}).get('ros__parameters') or {}) for node, body in document.items()}
 
 
+class EventsSpinner:
+    """An events executor spinning in a thread of its own until `close()` or the context's shutdown.
+
+    It spins in short slices and stops on a flag: its `shutdown()` blocks while another thread is inside `spin()`.
+    """
+
+    def __init__(self, context, name: str) -> None:
+        self.context = context
+        self.executor = EventsExecutor(context=context)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._spin, name=name, daemon=True)
+        self._closed = False
+
+    def start(self) -> None:
+        self._thread.start()
+        # A thread left inside the C++ spin when the interpreter finalises aborts the process: stop it at exit
+        # even when the owner never called close() (a script that died of an exception).
+        atexit.register(self.close)
+
+    def _spin(self) -> None:
+        try:
+            while not self._stop.is_set() and self.context.ok():
+                self.executor.spin_once(timeout_sec=0.1)
+        except ExternalShutdownException:  # the context was shut down first: nothing left to serve
+            pass
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        atexit.unregister(self.close)
+        self._stop.set()
+        self.executor.wake()
+        if self._thread.is_alive():
+            self._thread.join(timeout=timeout_s)
+        self.executor.shutdown(timeout_sec=timeout_s)
+        # Destroy the C++ executor now, not at some later collection (possibly while the interpreter finalises).
+        self.executor = None
+
+
 class Graph:
     """The running nodes; `close()` shuts them down (also on Ctrl-C in `cap up`)."""
 
@@ -78,6 +133,8 @@ class Graph:
         self.nodes: dict[str, Any] = {}
         overrides = options.overrides()
         self.executor = MultiThreadedExecutor(num_threads=num_threads, context=context)
+        self._quick = EventsSpinner(context, 'graph_events_executor')
+        self.api_node = None  # the robot API's clients, on the events executor
         try:
             for node_name, package, config_file, module_name, class_name in NODES:
                 node_class = getattr(importlib.import_module(module_name), class_name)
@@ -87,12 +144,17 @@ class Graph:
                 node = node_class(context=context, parameter_overrides=[
                     Parameter(name, value=value) for name, value in values.items()])
                 self.nodes[node_name] = node
-                self.executor.add_node(node)
+                (self._quick.executor if is_quick(node_name, values) else self.executor).add_node(node)
+            self.api_node = rclpy.create_node('lmp_node_robot_api', context=context)
+            self._quick.executor.add_node(self.api_node)
+            self.nodes['lmp_node'].robot.bind_clients(self.api_node)
         except Exception:
+            self._quick.close()
             self._destroy_nodes()
             raise
         self._thread = threading.Thread(target=self.executor.spin, name='graph_executor', daemon=True)
         self._thread.start()
+        self._quick.start()
 
     @property
     def world(self):
@@ -100,7 +162,8 @@ class Graph:
         return self.nodes['sim_bridge'].world
 
     def _destroy_nodes(self) -> None:
-        for node in reversed(list(self.nodes.values())):
+        nodes = list(self.nodes.values()) + ([self.api_node] if self.api_node is not None else [])
+        for node in reversed(nodes):
             try:
                 node.destroy_node()
             except Exception:  # shutting down: keep going with the other nodes
@@ -109,4 +172,5 @@ class Graph:
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=5.0)
         self._thread.join(timeout=5.0)
+        self._quick.close(timeout_s=5.0)
         self._destroy_nodes()

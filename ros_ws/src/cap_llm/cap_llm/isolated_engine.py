@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import select
 import signal
 import socket
 import subprocess
@@ -69,6 +70,8 @@ class IsolatedEngine:
         self.start_timeout_s = start_timeout_s
         self.default_lmp = ''
         self.restarts = 0
+        # Robot API round trips as generated code saw them (socket and node included), over recent commands.
+        self.api_call_seconds: list[float] = []
         self._listeners: list[Callable[[EngineEvent], None]] = []
         self._run_lock = threading.Lock()
         self._send_lock = threading.Lock()
@@ -95,6 +98,9 @@ class IsolatedEngine:
                                              pass_fds=fds, env=env, stdin=subprocess.DEVNULL)
         self._connection = Connection(parent_end.detach())
         self._control = Connection(control_end.detach())
+        # One poll object for the life of the connection (Connection.poll builds a selector at every call).
+        self._poller = select.poll()
+        self._poller.register(self._connection.fileno(), select.POLLIN)
         self._send(self._setup)
         ready = self._wait_for('ready', self.start_timeout_s)
         if ready is None:
@@ -113,7 +119,7 @@ class IsolatedEngine:
     def _receive(self, timeout_s: float) -> dict[str, Any] | None:
         """The next message, None if nothing came within `timeout_s`; EOFError when the process is gone."""
         assert self._connection is not None
-        if not self._connection.poll(timeout_s):
+        if not self._poller.poll(timeout_s * 1000):
             return None
         return wire.decode(self._connection.recv_bytes(wire.MAX_MESSAGE_BYTES))
 
@@ -247,6 +253,10 @@ class IsolatedEngine:
                     self._send(self._answer(message))
                     last_heard = time.monotonic()  # the robot's time is not the program's stall
                 elif op == 'result':
+                    calls = message.get('api_call_seconds')
+                    if isinstance(calls, list):
+                        self.api_call_seconds.extend(float(t) for t in calls if isinstance(t, (int, float)))
+                        del self.api_call_seconds[:-10_000]
                     return CommandResult(**_fields(CommandResult, message.get('result') or {}))
         except (EOFError, OSError):
             return self._lost(command, code, started, 'crashed')

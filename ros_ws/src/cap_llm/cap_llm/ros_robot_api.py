@@ -21,20 +21,13 @@ from std_msgs.msg import String
 from cap_interfaces.action import PickPlace
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectNames, GetObjectState
+from cap_llm.errors import RobotApiError, StoppedError  # noqa: F401  (callers import them from here too)
 
 
 MAX_SAY_CHARS = 2000
 _BOUNDED_REPR = reprlib.Repr()  # Python 3.11: limits are attributes, not constructor arguments
 _BOUNDED_REPR.maxlevel, _BOUNDED_REPR.maxlist, _BOUNDED_REPR.maxtuple, _BOUNDED_REPR.maxdict = 3, 10, 10, 10
 _BOUNDED_REPR.maxstring, _BOUNDED_REPR.maxother = 500, 200
-
-
-class RobotApiError(RuntimeError):
-    """A robot API call failed: unknown object, unreachable target, a service that does not answer..."""
-
-
-class StoppedError(RobotApiError):
-    """The program was stopped (/cap/stop or a cancelled /cap/execute goal) while it waited for the robot."""
 
 
 class RosTabletopApi:
@@ -46,12 +39,9 @@ class RosTabletopApi:
         self._say_publisher = say_publisher
         self.service_timeout_s = service_timeout_s
         self.motion_timeout_s = motion_timeout_s
-        group = ReentrantCallbackGroup()
-        self._names = node.create_client(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE,
-                                         callback_group=group)
-        self._state = node.create_client(GetObjectState, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE,
-                                         callback_group=group)
-        self._pick_place = ActionClient(node, PickPlace, GraphNames.PICK_PLACE_ACTION, callback_group=group)
+        self._client_node = node
+        self._create_clients(node)
+        self._ready: set[str] = set()  # services seen running: later calls skip the wait for them
         self.stop_requested = threading.Event()
         self._active_goal = None
         self._goal_lock = threading.Lock()
@@ -60,6 +50,28 @@ class RosTabletopApi:
         self.api_call_seconds: list[float] = []
 
     # -------------------------------------------------------------------------------------------- binding
+    def _create_clients(self, node: Node) -> None:
+        group = ReentrantCallbackGroup()
+        self._names = node.create_client(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE,
+                                         callback_group=group)
+        self._state = node.create_client(GetObjectState, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE,
+                                         callback_group=group)
+        self._pick_place = ActionClient(node, PickPlace, GraphNames.PICK_PLACE_ACTION, callback_group=group)
+
+    def bind_clients(self, node: Node) -> None:
+        """Move the service and action clients onto `node` (call before the first program runs).
+
+        A graph that spins a small client node on a fast executor of its own makes each call's round trip
+        independent of the executor that runs the long, blocking callbacks of the node given to the constructor.
+        """
+        old_node, old = self._client_node, (self._names, self._state, self._pick_place)
+        self._create_clients(node)
+        self._client_node = node
+        self._ready.clear()
+        old_node.destroy_client(old[0])
+        old_node.destroy_client(old[1])
+        old[2].destroy()
+
     def functions(self) -> dict[str, Callable[..., Any]]:
         """The names generated code sees."""
         return {'get_obj_names': self.get_obj_names, 'get_obj_pos': self.get_obj_pos, 'get_bbox': self.get_bbox,
@@ -164,10 +176,20 @@ class RosTabletopApi:
     # -------------------------------------------------------------------------------------------- plumbing
     def _call(self, client, request, what: str):
         started = time.monotonic()
-        if not client.wait_for_service(timeout_sec=self.service_timeout_s):
-            raise RobotApiError(f'{what} ({client.srv_name}) is not running')
+        # Discovery is checked until the service is first seen, then only when a call fails (to name the cause).
+        if client.srv_name not in self._ready:
+            if not client.wait_for_service(timeout_sec=self.service_timeout_s):
+                raise RobotApiError(f'{what} ({client.srv_name}) is not running')
+            self._ready.add(client.srv_name)
         try:
             return self._wait(client.call_async(request), self.service_timeout_s, what)
+        except StoppedError:
+            raise
+        except RobotApiError:
+            if not client.service_is_ready():
+                self._ready.discard(client.srv_name)
+                raise RobotApiError(f'{what} ({client.srv_name}) is not running') from None
+            raise
         finally:
             self._record(started)
 
