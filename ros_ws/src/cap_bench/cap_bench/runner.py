@@ -51,11 +51,11 @@ class BenchOptions:
 
 
 def plan(options: BenchOptions) -> list[Episode]:
+    """Every episode of the run, trial by trial across all rows: a run stopped early has covered every row alike."""
     episodes = []
-    for group in options.groups:
-        templates = [t for t in GROUPS[group][1] if t in options.tasks]
-        for template in templates:
-            for trial in range(options.trials):
+    for trial in range(options.trials):
+        for group in options.groups:
+            for template in (t for t in GROUPS[group][1] if t in options.tasks):
                 episodes.append(sample_episode(group, template, options.base_seed + trial))
     return episodes
 
