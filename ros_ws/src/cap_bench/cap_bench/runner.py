@@ -129,15 +129,22 @@ class _EpisodeRunner:
             raise TimeoutError(f'no answer from {what} within {timeout:.0f} s')
         return future.result()
 
-    def _perceived(self, episode: Episode, tolerance: float) -> bool:
+    def _perception_mismatch(self, episode: Episode, tolerance: float) -> str:
+        """How perception differs from the episode's scene ('' when it matches)."""
         try:
             source = self.graph.nodes['perception_node'].source
             seen = {obj.name: obj for obj in source.objects()}
-        except Exception:
-            return False
-        return set(seen) == {o.name for o in episode.objects} and all(
-            np.hypot(seen[o.name].position[0] - o.xy[0], seen[o.name].position[1] - o.xy[1]) < tolerance
-            for o in episode.objects)
+        except Exception as error:  # perception not ready: say why
+            return f'no objects yet ({error})'
+        wanted = {o.name: o for o in episode.objects}
+        problems = [f'missing {name}' for name in sorted(set(wanted) - set(seen))]
+        problems += [f'extra {name}' for name in sorted(set(seen) - set(wanted))]
+        for name in sorted(set(wanted) & set(seen)):
+            error = float(np.hypot(seen[name].position[0] - wanted[name].xy[0],
+                                   seen[name].position[1] - wanted[name].xy[1]))
+            if error >= tolerance:
+                problems.append(f'{name} {error:.3f} m off')
+        return ', '.join(problems)
 
     def run(self, episode: Episode) -> dict:
         from geometry_msgs.msg import Point
@@ -162,8 +169,9 @@ class _EpisodeRunner:
         self._call(self.forget.call_async(self.Trigger.Request()), 10, 'perception (forget)')
         self._call(self.reset_session.call_async(self.Trigger.Request()), 10, 'lmp_node (reset session)')
         tolerance = 0.005 if self.options.perception == 'ground_truth' else 0.02
-        if not _wait(lambda: self._perceived(episode, tolerance), 30):
-            record['reason'] = 'perception did not report the scene as reset (missing, extra or misplaced objects)'
+        if not _wait(lambda: not self._perception_mismatch(episode, tolerance), 30):
+            record['reason'] = ('perception did not report the scene as reset within 30 s: '
+                                + self._perception_mismatch(episode, tolerance))
             return record
         initial = {s.name: s.position for s in world.object_states()}
         sim_started = world.time

@@ -27,6 +27,8 @@ from cap_llm import wire
 from cap_llm.errors import RobotApiError, StoppedError
 
 HEARTBEAT_S = 0.25
+MEMORY_EXIT_CODE = 3  # isolated_engine reports this exit as 'memory'
+MAX_CODE_CHARS = 100_000  # of code and messages sent to the node (a model's answer could be longer)
 # Exception types a robot API error may arrive as; anything else arrives as RobotApiError.
 _API_ERRORS: dict[str, type[Exception]] = {
     'RobotApiError': RobotApiError, 'StoppedError': StoppedError, 'ValueError': ValueError,
@@ -109,26 +111,48 @@ def serve(connection: Connection, control: Connection) -> None:
     channel = _Channel(connection)
     setup = channel.receive()
     engine = _build_engine(setup, channel)
-    engine.add_listener(lambda event: channel.send({'op': 'event', **dataclasses.asdict(event)}))
     _limit_address_space(int(setup.get('address_space_extra_bytes', 0)))
     stopped = threading.Event()
     busy = threading.Event()  # a request is being handled: the parent is listening for heartbeats
+    # A cancel names its run: a late one must not stop the next command, an early one (read before its run
+    # message) is applied at the run's first event, after Engine.run has cleared the previous cancel.
+    runs = {'current': 0, 'cancelled': 0}
+
+    def forward(event) -> None:
+        if runs['cancelled'] == runs['current']:
+            engine.cancel()
+        fields = dataclasses.asdict(event)
+        fields['code'] = fields['code'][:MAX_CODE_CHARS]
+        fields['message'] = fields['message'][:MAX_CODE_CHARS]
+        channel.send({'op': 'event', **fields})
+
+    engine.add_listener(forward)
 
     def watch_control() -> None:
         try:
             while True:
-                if wire.decode(control.recv_bytes(1024)).get('op') == 'cancel':
-                    engine.cancel()
-        except (EOFError, OSError, wire.WireError):
+                message = wire.decode(control.recv_bytes(1024))
+                run_id = message.get('run')
+                if message.get('op') == 'cancel' and isinstance(run_id, int) and run_id >= runs['current']:
+                    runs['cancelled'] = run_id
+                    if run_id == runs['current']:
+                        engine.cancel()
+        except MemoryError:
+            os._exit(MEMORY_EXIT_CODE)
+        except BaseException:  # EOF: the parent is gone; anything else: it spoke nonsense
             pass
-        finally:  # the parent is gone
-            stopped.set()
-            os._exit(0)
+        stopped.set()
+        os._exit(0)
 
     def beat() -> None:
-        while not stopped.wait(HEARTBEAT_S):
-            if busy.is_set() and not channel.waiting_for_parent.is_set():
-                channel.send({'op': 'alive'})
+        try:
+            while not stopped.wait(HEARTBEAT_S):
+                if busy.is_set() and not channel.waiting_for_parent.is_set():
+                    channel.send({'op': 'alive'})
+        except MemoryError:
+            os._exit(MEMORY_EXIT_CODE)
+        except BaseException:  # without heartbeats the parent would call the next long step a stall
+            os._exit(4)
 
     threading.Thread(target=watch_control, name='engine_process_control', daemon=True).start()
     threading.Thread(target=beat, name='engine_process_heartbeat', daemon=True).start()
@@ -141,14 +165,12 @@ def serve(connection: Connection, control: Connection) -> None:
         op = message.get('op')
         busy.set()
         if op == 'run':
+            run_id = message.get('run')
+            runs['current'] = run_id if isinstance(run_id, int) else 0
             channel.call_seconds.clear()
             result = dataclasses.asdict(engine.run(str(message.get('command', ''))))
-            calls = channel.call_seconds[-10_000:]
-            try:
-                channel.send({'op': 'result', 'result': result, 'api_call_seconds': calls})
-            except wire.WireError:  # a huge answer from the model: report without the code
-                result['code'] = result['code'][:100_000]
-                channel.send({'op': 'result', 'result': result, 'api_call_seconds': calls})
+            result['code'] = result['code'][:MAX_CODE_CHARS]  # the node accepts at most wire.MAX_RESULT_BYTES
+            channel.send({'op': 'result', 'result': result, 'api_call_seconds': channel.call_seconds[-10_000:]})
         elif op == 'reset':
             engine.reset()
             channel.send({'op': 'reset_done'})
@@ -164,7 +186,7 @@ def main() -> None:
     try:
         serve(connection, control)
     except MemoryError:
-        os._exit(3)
+        os._exit(MEMORY_EXIT_CODE)
 
 
 if __name__ == '__main__':

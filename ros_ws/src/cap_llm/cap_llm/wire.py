@@ -1,16 +1,21 @@
 """Messages between lmp_node and its sandbox process: JSON with NumPy arrays, never pickle.
 
 The sandbox process runs untrusted code, so what it sends is untrusted too: decoding builds only JSON values and
-numeric NumPy arrays, and a message is at most MAX_MESSAGE_BYTES long (the receiver passes it as `maxlength`).
+numeric NumPy arrays, and a message is at most MAX_MESSAGE_BYTES long. Frames are a 4-byte big-endian length and
+the message, the framing of multiprocessing.connection.Connection (which the sandbox process uses); the node reads
+them with FrameBuffer from a socket it polls, so a half-sent frame never blocks it.
 """
 from __future__ import annotations
 
 import json
+import struct
 from typing import Any
 
 import numpy as np
 
 MAX_MESSAGE_BYTES = 4 << 20
+MAX_RESULT_BYTES = 1 << 20  # what the node accepts from the sandbox process: events, calls, results
+_HEADER = struct.Struct('!i')
 MAX_ITEMS = 200_000  # values (list items, array elements) in one message
 _ARRAY_KEY = '__ndarray__'
 # Only plain numeric arrays cross the boundary: no object, string or structured dtypes.
@@ -94,8 +99,38 @@ def decode(data: bytes) -> dict[str, Any]:
     """The message in `data`; WireError for anything but a JSON object of the kinds encode() writes."""
     try:
         message = json.loads(data.decode('utf-8'), object_hook=_from_json)
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as error:
+    except (ValueError, RecursionError) as error:  # also JSON and Unicode errors, and over-long integers
         raise WireError(f'malformed message: {type(error).__name__}') from None
     if not isinstance(message, dict):
         raise WireError('malformed message: not an object')
     return message
+
+
+def frame(data: bytes) -> bytes:
+    """`data` with its length in front."""
+    return _HEADER.pack(len(data)) + data
+
+
+class FrameBuffer:
+    """Bytes read from a socket in, whole messages out; a frame longer than `max_bytes` is a WireError."""
+
+    def __init__(self, max_bytes: int) -> None:
+        self.max_bytes = max_bytes
+        self._buffer = bytearray()
+
+    def feed(self, chunk: bytes) -> None:
+        self._buffer += chunk
+
+    def next_frame(self) -> bytes | None:
+        """The next whole message, or None until all of it has arrived."""
+        if len(self._buffer) < _HEADER.size:
+            return None
+        (length,) = _HEADER.unpack_from(self._buffer)
+        if length < 0 or length > self.max_bytes:
+            raise WireError(f'a message of {length} bytes announced (limit {self.max_bytes})')
+        end = _HEADER.size + length
+        if len(self._buffer) < end:
+            return None
+        data = bytes(self._buffer[_HEADER.size:end])
+        del self._buffer[:end]
+        return data

@@ -7,7 +7,9 @@ sandbox.py, "What it does not guarantee") end the sandbox process here, never th
 from __future__ import annotations
 
 import os
+import sys
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -171,3 +173,91 @@ def test_the_wire_round_trips_arrays_and_bounds_what_it_sends():
         wire.encode({'args': [row] * 1000})  # aliased: a million items to write
     with pytest.raises(wire.WireError):
         wire.encode({'args': [np.array(['text'])]})
+
+
+# -------------------------------------------------------------------------------------------------------------------
+# A sandbox process whose code escaped the in-process checks is hostile: it may send anything or nothing. The node's
+# side must return a clear result within its limits, kill the process, and keep working.
+
+def living_processes_in_group(group: int) -> list[int]:
+    """Pids of processes in process group `group` that are not zombies (a killed orphan waits to be reaped)."""
+    living = []
+    for entry in os.listdir('/proc'):
+        if entry.isdigit():
+            try:
+                with open(f'/proc/{entry}/stat', encoding='ascii', errors='replace') as stat:
+                    fields = stat.read().rsplit(')', 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[2]) == group and fields[0] not in 'ZX':
+                living.append(int(entry))
+    return living
+
+
+def hostile_engine(mode: str, api=None, **options) -> IsolatedEngine:
+    options = {'stall_limit_s': 1.0, 'cancel_grace_s': 0.5, 'start_timeout_s': 10.0, 'send_timeout_s': 1.0,
+               'model_allowance_s': 2.0, **options}
+    return IsolatedEngine(api or {'where': lambda: 'here', 'slow': lambda: time.sleep(2.0)}, {},
+                          SandboxLimits(time_limit_s=2.0),
+                          child_command=[sys.executable, '-m', 'cap_llm.testing.hostile_child', mode], **options)
+
+
+@pytest.mark.parametrize('mode, reason', [
+    ('half_message', 'stalled'),  # a frame that never completes must not block the node
+    ('flood', 'timeout'),  # heartbeats forever: the command's deadline still ends it
+    ('calls_without_reading', 'protocol'),  # the node's replies fill the socket: its send times out
+    ('huge_integer', 'protocol'),
+    ('result_of_wrong_shape', 'protocol'),
+    ('result_of_wrong_types', 'protocol'),
+    ('empty_event', 'protocol'),
+    ('realtime_signal', 'crashed'),
+    ('grandchild_keeps_the_socket', 'crashed'),  # the child died; its grandchild must not keep the run alive
+])
+def test_a_hostile_sandbox_process_is_killed_with_a_clear_result(mode, reason):
+    engine = hostile_engine(mode)
+    try:
+        first_pid = engine.pid
+        result = engine.run('cmd')
+        assert not result.success and result.error_type == 'SandboxProcessLost'
+        assert result.stop_reason == reason, result.message
+        assert 'session was lost' in result.message
+        assert engine.pid != first_pid and engine.restarts == 1
+        assert living_processes_in_group(first_pid) == []  # grandchildren included
+        again = engine.run('cmd')  # the new process misbehaves the same way: still a result, never an exception
+        assert not again.success and again.stop_reason == reason
+    finally:
+        engine.close()
+
+
+def test_a_hostile_process_that_never_gets_ready_fails_the_start_in_time():
+    with pytest.raises(RuntimeError, match='did not start'):
+        hostile_engine('never_ready', start_timeout_s=1.0)
+
+
+def test_a_flood_does_not_hide_a_cancel():
+    engine = hostile_engine('flood', model_allowance_s=600.0)
+    try:
+        threading.Timer(0.3, engine.cancel).start()
+        result = engine.run('cmd')
+        assert result.stop_reason == 'cancelled' and 'did not stop within' in result.message
+    finally:
+        engine.close()
+
+
+def test_the_cancel_grace_starts_after_the_robot_call_that_was_running():
+    # A stop arrives during a 2 s robot call; the program answers 0.1 s after the call returns: not a failure to stop.
+    engine = hostile_engine('slow_robot_then_result', stall_limit_s=5.0)
+    try:
+        threading.Timer(0.3, engine.cancel).start()
+        result = engine.run('cmd')
+        assert result.error_type == 'StoppedError' and engine.restarts == 0
+    finally:
+        engine.close()
+
+
+def test_close_during_a_run_ends_the_run_with_a_result():
+    engine = hostile_engine('flood', model_allowance_s=600.0)
+    threading.Timer(0.3, engine.close).start()
+    result = engine.run('cmd')
+    assert not result.success and 'shutting down' in result.message
+    assert engine.run('cmd').message.startswith('the sandbox process was closed')

@@ -39,6 +39,10 @@ def _pose_matrix(position, orientation_xyzw) -> np.ndarray:
     return pose
 
 
+FORGET_SETTLE_S = 1.0  # [s of frame time] after a forget during which frames replace, not add to, the objects
+FORGET_SETTLE_FRAMES = 8  # and at least this many frames: more than the image subscriptions queue (depth 5)
+
+
 def _stamp_seconds(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
@@ -46,6 +50,10 @@ def _stamp_seconds(header) -> float:
 class PerceptionNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('perception_node', **kwargs)
+        self._frames_lock = threading.Lock()  # camera frames, and forgetting (see _start_detector)
+        self._generation = 0
+        self._replace_until: float | None = None
+        self._frames_since_forget = 0
         source = self._parameter('source', 'ground_truth',
                                  'Where objects come from: ground_truth (simulator object array), rgbd (colour '
                                  'detector on camera images) or stub (YAML file).')
@@ -93,11 +101,14 @@ class PerceptionNode(Node):
                                       '(ROS optical convention: +z forward, +y down).')
         self._world_from_optical = None if use_pose_topic else _pose_matrix(position, orientation)
         self._detector_config = DetectorConfig()
-        self._frames_lock = threading.Lock()
         self._color: Image | None = None
         self._depth: Image | None = None
         self._camera_matrix: np.ndarray | None = None
         self._last_detected_stamp = -1.0
+        # Forgetting (after a scene reset) races with frames of the old scene still queued or being analysed: each
+        # forget starts a new generation, analyses begun before it are dropped, and the first FORGET_SETTLE_FRAMES
+        # frames after it, and those within FORGET_SETTLE_S of frame time of the first, replace the objects instead
+        # of adding to the remembered ones, so a queued old frame cannot leave old objects behind for good.
         prefix = f'{GraphNames.CAMERA_NAMESPACE}/{camera}'
         # Images are sensor data: the latest frame matters, a lost one is replaced by the next.
         images = MutuallyExclusiveCallbackGroup()
@@ -130,9 +141,11 @@ class PerceptionNode(Node):
                 or color.header.stamp != depth.header.stamp):
             return
         stamp = _stamp_seconds(color.header)
-        if stamp <= self._last_detected_stamp:
-            return
-        self._last_detected_stamp = stamp
+        with self._frames_lock:
+            if stamp <= self._last_detected_stamp:
+                return
+            self._last_detected_stamp = stamp
+            generation = self._generation
         try:
             view = CameraView(image_to_array(color), image_to_array(depth), self._camera_matrix,
                               self._world_from_optical)
@@ -140,14 +153,25 @@ class PerceptionNode(Node):
             self.get_logger().error(str(error), throttle_duration_sec=5.0)
             return
         detected = detect(view, self._detector_config)
-        self.source.update(remember_unseen(self.source.objects(), detected), stamp)
+        with self._frames_lock:
+            if generation != self._generation:
+                return  # analysed a frame from before a forget
+            if self._replace_until is None:
+                self._replace_until = stamp + FORGET_SETTLE_S
+            self._frames_since_forget += 1
+            settling = stamp < self._replace_until or self._frames_since_forget <= FORGET_SETTLE_FRAMES
+            self.source.update(detected if settling else remember_unseen(self.source.objects(), detected), stamp)
 
     # ------------------------------------------------------------------------------------------ services
     def _on_forget(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         if self._stub_objects is not None:
             response.message = 'the stub source is fixed; nothing to forget'
         else:
-            self.source.clear()
+            with self._frames_lock:
+                self._generation += 1
+                self._replace_until = None
+                self._frames_since_forget = 0
+                self.source.clear()
             response.message = f'forgot every object; waiting for the next observation from {self.source.description}'
         response.success = True
         return response

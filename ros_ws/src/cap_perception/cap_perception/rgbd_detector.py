@@ -31,7 +31,7 @@ class DetectorConfig:
     table_x: tuple[float, float] = (-0.3, 0.3)
     table_y: tuple[float, float] = (-0.8, -0.2)
     min_height: float = 0.004  # above the table surface [m]; lower points are table
-    max_height: float = 0.30  # higher points are the robot, not objects [m]
+    max_height: float = 0.22  # higher points are the robot (the tool travels at 0.25), not objects [m]
     max_color_distance: float = 0.22  # in normalised-RGB units; farther pixels are not an object colour
     min_brightness: int = 35  # darker pixels carry no reliable colour (shadowed sides, the robot)
     min_pixels: int = 25  # smaller regions are noise
