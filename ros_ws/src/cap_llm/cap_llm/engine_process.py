@@ -24,16 +24,10 @@ from multiprocessing.connection import Connection
 from typing import Any, Callable
 
 from cap_llm import wire
-from cap_llm.errors import RobotApiError, StoppedError
+from cap_llm.errors import RobotApiError
+from cap_llm.wire import API_ERRORS, MAX_CODE_CHARS, MEMORY_EXIT_CODE
 
 HEARTBEAT_S = 0.25
-MEMORY_EXIT_CODE = 3  # isolated_engine reports this exit as 'memory'
-MAX_CODE_CHARS = 100_000  # of code and messages sent to the node (a model's answer could be longer)
-# Exception types a robot API error may arrive as; anything else arrives as RobotApiError.
-_API_ERRORS: dict[str, type[Exception]] = {
-    'RobotApiError': RobotApiError, 'StoppedError': StoppedError, 'ValueError': ValueError,
-    'TypeError': TypeError, 'KeyError': KeyError, 'IndexError': IndexError, 'RuntimeError': RuntimeError,
-}
 
 
 class _Channel:
@@ -73,7 +67,7 @@ class _Channel:
             raise RobotApiError(f'{name}: the robot answered out of turn')
         error = reply.get('error')
         if error:
-            raise _API_ERRORS.get(str(error.get('type')), RobotApiError)(str(error.get('message', '')))
+            raise API_ERRORS.get(str(error.get('type')), RobotApiError)(str(error.get('message', '')))
         return reply.get('value')
 
 

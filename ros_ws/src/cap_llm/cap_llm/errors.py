@@ -67,8 +67,9 @@ class SandboxProcessLost(SandboxError):
     """The process that ran the session's programs died or was killed; the session is lost.
 
     `reason`: 'crashed' (the interpreter died, e.g. a C stack overflow), 'stalled' (one operation held the
-    interpreter past the stall limit), 'memory' (the address-space limit was hit) or 'cancelled' (a stop was not
-    honoured within the grace period).
+    interpreter past the stall limit), 'memory' (the address-space limit was hit), 'cancelled' (a stop was not
+    honoured within the grace period), 'timeout' (past the command's deadline), 'protocol' (a malformed message) or
+    'closed' (the node is shutting down).
     """
 
     def __init__(self, message: str, reason: str) -> None:

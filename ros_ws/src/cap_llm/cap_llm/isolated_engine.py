@@ -47,13 +47,8 @@ from cap_llm.engine import CODE, DONE, ERROR, EXECUTING, GENERATING, CommandResu
 from cap_llm.errors import SandboxProcessLost
 from cap_llm.sandbox import SandboxLimits
 
-# Exception types that reach the program by name (engine_process._API_ERRORS); others go as their nearest base.
-_FORWARDED_ERRORS = ('StoppedError', 'RobotApiError', 'ValueError', 'TypeError', 'KeyError', 'IndexError',
-                     'RuntimeError')
-_MEMORY_EXIT_CODE = 3
 _SESSION_LOST = 'the session was lost (earlier variables and generated functions are forgotten) and a new one started'
 _STAGES = (GENERATING, CODE, EXECUTING, DONE, ERROR)
-_MAX_CODE_CHARS = 100_000
 _MAX_MESSAGE_CHARS = 10_000
 # Environment the sandbox process keeps: what Python, the model client and its TLS need; nothing of ROS.
 _KEPT_ENVIRONMENT = ('PATH', 'HOME', 'LANG', 'LC_ALL', 'TMPDIR', 'HTTP_PROXY', 'HTTPS_PROXY', 'NO_PROXY',
@@ -80,7 +75,7 @@ def _event(message: Mapping[str, Any]) -> EngineEvent:
     if not isinstance(command_id, int) or stage not in _STAGES:
         raise _ProcessLost('protocol')
     return EngineEvent(command_id, stage, _text(message.get('lmp'), 200), _text(message.get('code', ''),
-                       _MAX_CODE_CHARS), _text(message.get('message', ''), _MAX_MESSAGE_CHARS))
+                       wire.MAX_CODE_CHARS), _text(message.get('message', ''), _MAX_MESSAGE_CHARS))
 
 
 def _result(values: Any) -> CommandResult:
@@ -94,12 +89,11 @@ def _result(values: Any) -> CommandResult:
         value = values.get(name)
         if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
             raise _ProcessLost('protocol')
-        fields[name] = value[:_MAX_CODE_CHARS] if isinstance(value, str) else value
-    for name in ('error_line',):
-        value = values.get(name)
-        if value is not None and (not isinstance(value, int) or isinstance(value, bool)):
-            raise _ProcessLost('protocol')
-        fields[name] = value
+        fields[name] = value[:wire.MAX_CODE_CHARS] if isinstance(value, str) else value
+    line = values.get('error_line')
+    if line is not None and (not isinstance(line, int) or isinstance(line, bool)):
+        raise _ProcessLost('protocol')
+    fields['error_line'] = line
     source = values.get('error_source')
     fields['error_source'] = _text(source, 1000) if source is not None else None
     timings, functions = values.get('timings'), values.get('generated_functions')
@@ -190,11 +184,12 @@ class IsolatedEngine:
         default_lmp = message.get('default_lmp')
         self.default_lmp = default_lmp if isinstance(default_lmp, str) else ''
 
-    def _send(self, message: dict[str, Any]) -> None:
+    def _send(self, message: dict[str, Any] | bytes) -> None:
+        """Send a message (or one already encoded)."""
         if self._data is None:
             raise _ProcessLost('crashed')
         try:
-            self._data.sendall(wire.frame(wire.encode(message)))
+            self._data.sendall(wire.frame(message if isinstance(message, bytes) else wire.encode(message)))
         except (OSError, wire.WireError):  # a full socket the process does not read, or a closed one
             raise _ProcessLost('protocol') from None
 
@@ -381,28 +376,28 @@ class IsolatedEngine:
                                          if isinstance(t, (int, float)) and not isinstance(t, bool))
             del self.api_call_seconds[:-10_000]
 
-    def _answer(self, message: dict[str, Any]) -> dict[str, Any]:
-        """Run one robot API call for the program; the reply carries the value or the error."""
+    def _answer(self, message: dict[str, Any]) -> bytes:
+        """Run one robot API call for the program; the encoded reply carries the value or the error."""
         reply: dict[str, Any] = {'op': 'reply', 'id': message.get('id')}
         name, args, kwargs = message.get('name'), message.get('args'), message.get('kwargs')
         function = self._api.get(name) if isinstance(name, str) else None
         if function is None or not isinstance(args, list) or not isinstance(kwargs, dict):
             reply['error'] = {'type': 'RobotApiError', 'message': f'there is no robot function {str(name)[:100]!r}'}
-            return reply
+            return wire.encode(reply)
         try:
             reply['value'] = function(*args, **kwargs)
-            wire.encode(reply)  # a value that cannot travel is an error of the call, not of the channel
+            return wire.encode(reply)  # a value that cannot travel is an error of the call, not of the channel
         except Exception as error:  # every failure of a robot call goes back to the program that made it
             reply.pop('value', None)
-            kind = next((cls.__name__ for cls in type(error).__mro__ if cls.__name__ in _FORWARDED_ERRORS),
+            kind = next((cls.__name__ for cls in type(error).__mro__ if cls.__name__ in wire.API_ERRORS),
                         'RobotApiError')
             reply['error'] = {'type': kind, 'message': str(error)[:2000]}
-        return reply
+            return wire.encode(reply)
 
     def _lost(self, command: str, code: str, started: float, reason: str) -> CommandResult:
         exit_text = self._end_process()  # kill first: a stalled process is not waited for
         exit_code = self._process.returncode if self._process is not None else None
-        if reason == 'crashed' and exit_code == _MEMORY_EXIT_CODE:
+        if reason == 'crashed' and exit_code == wire.MEMORY_EXIT_CODE:
             reason = 'memory'
         what = {
             'crashed': f'the sandbox process running the program died ({exit_text})',

@@ -13,9 +13,18 @@ from typing import Any
 
 import numpy as np
 
+from cap_llm.errors import RobotApiError, StoppedError
+
 MAX_MESSAGE_BYTES = 4 << 20
 MAX_RESULT_BYTES = 1 << 20  # what the node accepts from the sandbox process: events, calls, results
 _HEADER = struct.Struct('!i')
+MAX_CODE_CHARS = 100_000  # of code and messages the sandbox process sends (a model's answer could be longer)
+MEMORY_EXIT_CODE = 3  # the sandbox process' exit status when it ran out of memory
+# Exception types a robot API error travels as, by name; any other error travels as its nearest base among them.
+API_ERRORS: dict[str, type[Exception]] = {
+    'StoppedError': StoppedError, 'RobotApiError': RobotApiError, 'ValueError': ValueError,
+    'TypeError': TypeError, 'KeyError': KeyError, 'IndexError': IndexError, 'RuntimeError': RuntimeError,
+}
 MAX_ITEMS = 200_000  # values (list items, array elements) in one message
 _ARRAY_KEY = '__ndarray__'
 # Only plain numeric arrays cross the boundary: no object, string or structured dtypes.

@@ -14,21 +14,13 @@ import pytest
 from cap_llm.errors import CodeRejected, ExecutionStopped
 from cap_llm.llm import Completion
 from cap_llm.sandbox import Sandbox, SandboxLimits
-
-LIMITS = SandboxLimits(time_limit_s=1.0, max_memory_growth_bytes=256 << 20)
+from cap_llm.testing.sandbox_programs import TEST_LIMITS as LIMITS, run_program as run
 
 
 @pytest.fixture(scope='module')
 def sandbox() -> Sandbox:
     return Sandbox(LIMITS)
 
-
-def run(sandbox: Sandbox, source: str, **names: object) -> dict:
-    said: list[str] = []
-    scope = sandbox.new_scope({'say': lambda text: said.append(str(text)), **names})
-    sandbox.execute(sandbox.compile(source), scope)
-    scope['said'] = said
-    return scope
 
 _CHILD = r'''
 import json, resource, sys, time

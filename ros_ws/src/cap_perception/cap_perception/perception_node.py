@@ -23,8 +23,8 @@ from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 from cap_perception.rgbd_detector import CameraView, DetectorConfig, detect
 from cap_perception.ros_conversions import from_msg, image_to_array, to_msg
-from cap_perception.sources import (NoObservationError, SnapshotSource, UnknownObjectError, load_stub_objects,
-                                    remember_unseen)
+from cap_perception.sources import (CameraMemory, NoObservationError, SnapshotSource, UnknownObjectError,
+                                    load_stub_objects)
 
 SOURCES = ('ground_truth', 'rgbd', 'stub')
 
@@ -39,10 +39,6 @@ def _pose_matrix(position, orientation_xyzw) -> np.ndarray:
     return pose
 
 
-FORGET_SETTLE_S = 1.0  # [s of frame time] after a forget during which frames replace, not add to, the objects
-FORGET_SETTLE_FRAMES = 8  # and at least this many frames: more than the image subscriptions queue (depth 5)
-
-
 def _stamp_seconds(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
@@ -50,10 +46,7 @@ def _stamp_seconds(header) -> float:
 class PerceptionNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('perception_node', **kwargs)
-        self._frames_lock = threading.Lock()  # camera frames, and forgetting (see _start_detector)
-        self._generation = 0
-        self._replace_until: float | None = None
-        self._frames_since_forget = 0
+        self._memory: CameraMemory | None = None  # the RGB-D source's frame bookkeeping
         source = self._parameter('source', 'ground_truth',
                                  'Where objects come from: ground_truth (simulator object array), rgbd (colour '
                                  'detector on camera images) or stub (YAML file).')
@@ -101,14 +94,11 @@ class PerceptionNode(Node):
                                       '(ROS optical convention: +z forward, +y down).')
         self._world_from_optical = None if use_pose_topic else _pose_matrix(position, orientation)
         self._detector_config = DetectorConfig()
+        self._memory = CameraMemory(self.source)
+        self._frames_lock = threading.Lock()
         self._color: Image | None = None
         self._depth: Image | None = None
         self._camera_matrix: np.ndarray | None = None
-        self._last_detected_stamp = -1.0
-        # Forgetting (after a scene reset) races with frames of the old scene still queued or being analysed: each
-        # forget starts a new generation, analyses begun before it are dropped, and the first FORGET_SETTLE_FRAMES
-        # frames after it, and those within FORGET_SETTLE_S of frame time of the first, replace the objects instead
-        # of adding to the remembered ones, so a queued old frame cannot leave old objects behind for good.
         prefix = f'{GraphNames.CAMERA_NAMESPACE}/{camera}'
         # Images are sensor data: the latest frame matters, a lost one is replaced by the next.
         images = MutuallyExclusiveCallbackGroup()
@@ -141,36 +131,25 @@ class PerceptionNode(Node):
                 or color.header.stamp != depth.header.stamp):
             return
         stamp = _stamp_seconds(color.header)
-        with self._frames_lock:
-            if stamp <= self._last_detected_stamp:
-                return
-            self._last_detected_stamp = stamp
-            generation = self._generation
+        token = self._memory.begin(stamp)
+        if token is None:
+            return
         try:
             view = CameraView(image_to_array(color), image_to_array(depth), self._camera_matrix,
                               self._world_from_optical)
         except ValueError as error:
             self.get_logger().error(str(error), throttle_duration_sec=5.0)
             return
-        detected = detect(view, self._detector_config)
-        with self._frames_lock:
-            if generation != self._generation:
-                return  # analysed a frame from before a forget
-            if self._replace_until is None:
-                self._replace_until = stamp + FORGET_SETTLE_S
-            self._frames_since_forget += 1
-            settling = stamp < self._replace_until or self._frames_since_forget <= FORGET_SETTLE_FRAMES
-            self.source.update(detected if settling else remember_unseen(self.source.objects(), detected), stamp)
+        self._memory.record(token, stamp, detect(view, self._detector_config))
 
     # ------------------------------------------------------------------------------------------ services
     def _on_forget(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         if self._stub_objects is not None:
             response.message = 'the stub source is fixed; nothing to forget'
         else:
-            with self._frames_lock:
-                self._generation += 1
-                self._replace_until = None
-                self._frames_since_forget = 0
+            if self._memory is not None:
+                self._memory.forget()
+            else:
                 self.source.clear()
             response.message = f'forgot every object; waiting for the next observation from {self.source.description}'
         response.success = True

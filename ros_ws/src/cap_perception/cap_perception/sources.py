@@ -81,6 +81,54 @@ def remember_unseen(previous: Iterable[PerceivedObject], seen: Iterable[Perceive
     return sorted(current.values(), key=lambda obj: obj.name)
 
 
+class CameraMemory:
+    """Feeds a SnapshotSource from camera frames: each frame's objects plus those it no longer sees.
+
+    Objects do not vanish when occluded (remember_unseen). `forget()` (after a scene reset) clears them, and races
+    with frames of the old scene still queued or being analysed: each forget starts a new generation, an analysis
+    begun before it is dropped, and the first `settle_frames` frames after it, and those within `settle_s` of frame
+    time of the first, replace the objects instead of adding to the remembered ones, so a queued old frame cannot
+    leave old objects behind for good. Thread-safe.
+    """
+
+    def __init__(self, source: SnapshotSource, settle_s: float = 1.0, settle_frames: int = 8) -> None:
+        self.source = source
+        self.settle_s = settle_s
+        self.settle_frames = settle_frames  # more than the image subscriptions queue
+        self._lock = threading.Lock()
+        self._last_stamp = -1.0
+        self._generation = 0
+        self._replace_until: float | None = None
+        self._frames_since_forget = 0
+
+    def begin(self, stamp: float) -> int | None:
+        """A token for analysing the frame stamped `stamp`, or None if a frame as new was already taken."""
+        with self._lock:
+            if stamp <= self._last_stamp:
+                return None
+            self._last_stamp = stamp
+            return self._generation
+
+    def record(self, token: int, stamp: float, detected: Sequence[PerceivedObject]) -> None:
+        """The objects detected in the frame begun with `token`."""
+        with self._lock:
+            if token != self._generation:
+                return  # analysed a frame from before a forget
+            if self._replace_until is None:
+                self._replace_until = stamp + self.settle_s
+            self._frames_since_forget += 1
+            settling = stamp < self._replace_until or self._frames_since_forget <= self.settle_frames
+            self.source.update(detected if settling else remember_unseen(self.source.objects(), detected), stamp)
+
+    def forget(self) -> None:
+        """Forget every object; answers wait for the next frame."""
+        with self._lock:
+            self._generation += 1
+            self._replace_until = None
+            self._frames_since_forget = 0
+            self.source.clear()
+
+
 def load_stub_objects(path: str | pathlib.Path) -> list[PerceivedObject]:
     """Objects listed in a YAML file:
 
@@ -109,4 +157,4 @@ def load_stub_objects(path: str | pathlib.Path) -> list[PerceivedObject]:
     return objects
 
 
-__all__ = ['NoObservationError', 'SnapshotSource', 'UnknownObjectError', 'load_stub_objects', 'remember_unseen']
+__all__ = ['CameraMemory', 'NoObservationError', 'SnapshotSource', 'UnknownObjectError', 'load_stub_objects', 'remember_unseen']

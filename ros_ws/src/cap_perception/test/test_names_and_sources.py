@@ -3,7 +3,8 @@ import pytest
 
 from cap_perception.names import UnknownObjectError, canonical_name, resolve_name
 from cap_perception.objects import PerceivedObject
-from cap_perception.sources import NoObservationError, SnapshotSource, load_stub_objects, remember_unseen
+from cap_perception.sources import (CameraMemory, NoObservationError, SnapshotSource, load_stub_objects,
+                                    remember_unseen)
 
 
 @pytest.mark.parametrize('typed', ['red block', 'the red block', 'Red_Block', 'THE  red-block', 'red cube'])
@@ -78,3 +79,20 @@ def test_objects_hidden_from_the_camera_stay_known_as_not_visible():
     merged = remember_unseen([red, blue], [moved_red])  # red now sits on blue and hides it
     assert [(o.name, o.visible, o.position) for o in merged] == [
         ('blue block', False, blue.position), ('red block', True, moved_red.position)]
+
+
+def test_frames_of_the_old_scene_leave_nothing_behind_after_a_forget():
+    old = PerceivedObject.from_fields('cyan', 'block', (0.1, -0.5, 0.02), (0.04,) * 3)
+    new = PerceivedObject.from_fields('red', 'block', (0.0, -0.4, 0.02), (0.04,) * 3)
+    memory = CameraMemory(SnapshotSource('camera'), settle_s=1.0, settle_frames=3)
+    memory.record(memory.begin(1.0), 1.0, [old])
+    in_flight = memory.begin(1.1)  # an analysis of the old scene still running when the scene is reset
+    memory.forget()
+    memory.record(in_flight, 1.1, [old])
+    assert memory.source.objects() == []
+    memory.record(memory.begin(1.2), 1.2, [old])  # a queued old frame, analysed after the forget
+    for stamp in (5.0, 5.1, 5.2):  # the new scene, later than the settling time of the first frame
+        memory.record(memory.begin(stamp), stamp, [new])
+    assert [o.name for o in memory.source.objects()] == ['red block']
+    memory.record(memory.begin(5.3), 5.3, [])  # settled: an object no longer seen is remembered
+    assert [(o.name, o.visible) for o in memory.source.objects()] == [('red block', False)]
