@@ -96,6 +96,12 @@ def test_cap_stop_halts_the_arm_within_half_a_second_of_simulated_time(ros_conte
         held = world.joint_positions()
         time.sleep(0.5)
         assert np.allclose(world.joint_positions(), held, atol=1e-3)
+        # Perception's answers reach every client of its services in the process; none of the graph's own
+        # clients may sit on the multi-threaded executor, where each answer would cost a Python wait-set rebuild.
+        perception_services = {GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE}
+        on_busy_executor = [(node.get_name(), client.srv_name) for node in graph.graph.executor.get_nodes()
+                            for client in node.clients if client.srv_name in perception_services]
+        assert on_busy_executor == []
     finally:
         graph.close()
 

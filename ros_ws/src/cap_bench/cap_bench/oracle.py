@@ -96,20 +96,22 @@ def oracle_program(episode: Episode) -> str:
 
 
 def _line_program(kind: str) -> str:
-    # Blocks 0.1 m apart along the line; the line is shifted across the table to where it keeps farthest from the
-    # objects as they stand, so that no block lands on a bowl's rim or on a block still waiting to be moved.
+    # Blocks 0.1 m apart along the line. The line's centre (and, for a diagonal, which diagonal) is searched over
+    # the middle of the table for where its spots keep farthest from the objects as they stand, so that no block
+    # lands on a bowl's rim or on a block still waiting to be moved, and the fingers have room beside each spot.
     if kind == 'horizontal':
-        points, shift = 'np.column_stack([offsets, np.zeros(len(offsets))])', '[0.0, 1.0]'
+        directions = '[np.array([1.0, 0.0])]'
     elif kind == 'vertical':
-        points, shift = 'np.column_stack([np.zeros(len(offsets)), offsets])', '[1.0, 0.0]'
+        directions = '[np.array([0.0, 1.0])]'
     else:
-        points, shift = 'np.column_stack([offsets, offsets]) / np.sqrt(2)', '[1.0, -1.0]'
+        directions = '[np.array([1.0, 1.0]) / np.sqrt(2), np.array([1.0, -1.0]) / np.sqrt(2)]'
     return ("offsets = (np.arange(len(block_names)) - (len(block_names) - 1) / 2) * 0.1\n"
-            f"line = {points} + np.array([0.0, -0.5])\n"
-            f"shift_direction = np.array({shift}) / np.linalg.norm({shift})\n"
-            "others = [get_obj_pos(name) for name in get_obj_names()]\n"
-            "def clearance(shift):\n"
-            "    return min(np.linalg.norm(p - o) for p in line + shift * shift_direction for o in others)\n"
-            "best = max(np.linspace(-0.2, 0.2, 41), key=clearance)\n"
-            "for name, xy in zip(block_names, line + best * shift_direction):\n"
+            "others = np.array([get_obj_pos(name) for name in get_obj_names()])\n"
+            "def clearance(line):\n"
+            "    return np.min(np.linalg.norm(line[:, None, :] - others[None, :, :], axis=2))\n"
+            "candidates = [offsets[:, None] * direction + np.array([x, y])\n"
+            f"              for direction in {directions}\n"
+            "              for x in np.linspace(-0.1, 0.1, 11) for y in np.linspace(-0.6, -0.4, 11)]\n"
+            "best = max(candidates, key=clearance)\n"
+            "for name, xy in zip(block_names, best):\n"
             "    put_first_on_second(name, xy)\n")

@@ -182,6 +182,15 @@ class PickPlaceConfig:
     # Release height above the expected contact; a bowl's floor is taken this far above its bottom.
     place_clearance: float = 0.005
     bowl_floor_thickness: float = 0.01
+    # Thickness of a finger outside its pad; and the room beside the fingers beyond which all grasp or place yaws
+    # count as equally clear of the objects around.
+    finger_thickness: float = 0.014
+    finger_room: float = 0.03
+    # Camera position (world) that perception watches the table from, or None. When set, after placing the tool
+    # moves this far sideways at travel height, out of that camera's line of sight to what it just placed, so that
+    # perception sees the new stack rather than remembering its blocks where they were.
+    clear_view_from: tuple[float, float, float] | None = None
+    clear_view_distance: float = 0.12
     # Tracking error [rad] that the executor reads as contact during a stop-on-contact descent.
     contact_tolerance: float = 0.002
     # After retreating, the object must lie this close (xy) to the target; farther, it was dropped on the way.
@@ -410,6 +419,75 @@ class _Planner:
         return self.line(xyz, yaw, what)
 
 
+def _footprint_radius(obj: ObjectInfo) -> float:
+    """Radius of the circle around the object's footprint (a block's corners, a bowl's rim)."""
+    return math.hypot(obj.size[0], obj.size[1]) / 2 if obj.category != CATEGORY_BOWL else max(obj.size[:2]) / 2
+
+
+def top_block_in_bowl(bowl: ObjectInfo, neighbours: Sequence[ObjectInfo]) -> ObjectInfo | None:
+    """The highest block resting in the bowl, if any: one more block goes on top of it, squarely.
+
+    Dropped at the bowl's centre, blocks pile up crooked on each other and a pile of three or four topples over
+    the rim; stacked squarely they form a steady tower in the bowl.
+    """
+    inside = [other for other in neighbours if other.category != CATEGORY_BOWL
+              and math.dist(other.position[:2], bowl.position[:2]) < max(bowl.size[:2]) / 2]
+    return max(inside, key=lambda other: other.top) if inside else None
+
+
+def finger_clearance(xy: Sequence[float], yaw: float, neighbours: Sequence[ObjectInfo],
+                     finger_reach: float) -> float:
+    """Room between the fingers around `xy` (turned by `yaw`, reaching `finger_reach` out from the centre) and the
+    nearest neighbouring object [m].
+
+    The fingers close along the TCP y axis, world (sin yaw, -cos yaw) for a top-down pose.
+    """
+    axis = np.array([math.sin(yaw), -math.cos(yaw)])
+    centre = np.asarray(xy[:2], dtype=float)
+    room = math.inf
+    for other in neighbours:
+        for side in (1.0, -1.0):
+            finger = centre + side * finger_reach * axis
+            room = min(room, float(np.linalg.norm(finger - np.asarray(other.position[:2]))) - _footprint_radius(other))
+    return room
+
+
+def _roomiest_yaw(planner: '_Planner', xyz: Sequence[float], yaws: Sequence[float],
+                  neighbours: Sequence[ObjectInfo], finger_reach: float, config: PickPlaceConfig, what: str) -> float:
+    """Of equivalent yaws, one that keeps the fingers clearest of the neighbours, then the least wrist turning.
+
+    A finger that comes down on or against a neighbour pushes it out of its place (or off the table).
+    """
+    rooms = {yaw: min(finger_clearance(xyz, yaw, neighbours, finger_reach), config.finger_room) for yaw in yaws}
+    roomiest = max(rooms.values())
+    try:
+        return planner.best_yaw(xyz, [yaw for yaw in yaws if rooms[yaw] >= roomiest - 1e-3], what)
+    except PickPlaceError:  # the roomiest yaws are out of reach: any reachable one
+        return planner.best_yaw(xyz, yaws, what)
+
+
+def _clear_view_step(planner: '_Planner', place_xy: Sequence[float], travel_z: float, yaw: float,
+                     config: PickPlaceConfig) -> TrajectoryStep | None:
+    """A straight move at travel height that takes the tool out of the camera's line of sight to `place_xy`.
+
+    Sideways across the line from the camera, first to the side nearer the robot's base (easier to reach), else
+    the other side, else straight away from the camera; None if none of them can be reached.
+    """
+    camera = np.asarray(config.clear_view_from[:2], dtype=float)
+    target = np.asarray(place_xy[:2], dtype=float)
+    away = target - camera
+    away = away / np.linalg.norm(away) if np.linalg.norm(away) > 1e-3 else np.array([1.0, 0.0])
+    across = np.array([-away[1], away[0]])
+    sides = sorted((target + config.clear_view_distance * across, target - config.clear_view_distance * across),
+                   key=lambda point: float(np.linalg.norm(point)))
+    for point in [*sides, target + config.clear_view_distance * away]:
+        try:
+            return planner.line((float(point[0]), float(point[1]), travel_z), yaw, 'out of the camera\'s view')
+        except PickPlaceError:
+            continue
+    return None
+
+
 def _target_point(target: Target) -> tuple[float, float]:
     if isinstance(target, ObjectInfo):
         return float(target.position[0]), float(target.position[1])
@@ -420,12 +498,14 @@ def _target_point(target: Target) -> tuple[float, float]:
 
 
 def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[float],
-                    config: PickPlaceConfig = PickPlaceConfig(), obstacle_height: float | None = None
-                    ) -> PickPlacePlan:
+                    config: PickPlaceConfig = PickPlaceConfig(), obstacle_height: float | None = None,
+                    neighbours: Sequence[ObjectInfo] = ()) -> PickPlacePlan:
     """Plan picking `obj` and placing it on `target` (an object, or an x, y point of the table) from `current_joints`.
 
     `obstacle_height` is the top of the tallest thing the held object must pass over (default: the target's and
-    the object's own tops). Raises PickPlaceError with the result code when it cannot be done.
+    the object's own tops). `neighbours` are the other objects in view (not `obj`): a block goes into a bowl on
+    top of the blocks already there, and the place yaw keeps the fingers clear of what stands around the target.
+    Raises PickPlaceError with the result code when it cannot be done.
     """
     workspace = config.workspace
     target_xy = _target_point(target)
@@ -460,12 +540,17 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     lowest_tcp = table_z + workspace.min_tcp_height
     grasp_z = max(obj.bottom + config.grasp_height_fraction * obj.size[2], lowest_tcp)
     held_below_tcp = grasp_z - obj.bottom  # from the TCP down to the held object's bottom
-    if target_object is None:
+    neighbours = [other for other in neighbours if other.name != obj.name]
+    support = target_object  # what the held object will rest on (None: the table)
+    if target_object is not None and target_object.category == CATEGORY_BOWL:
+        support = top_block_in_bowl(target_object, neighbours) or target_object
+    place_xy = target_xy if support is None else (float(support.position[0]), float(support.position[1]))
+    if support is None:
         place_z = table_z + held_below_tcp + config.place_clearance
-    elif target_object.category == CATEGORY_BOWL:
-        place_z = target_object.bottom + config.bowl_floor_thickness + held_below_tcp + config.place_clearance
+    elif support.category == CATEGORY_BOWL:
+        place_z = support.bottom + config.bowl_floor_thickness + held_below_tcp + config.place_clearance
     else:
-        place_z = target_object.top + held_below_tcp + config.place_clearance
+        place_z = support.top + held_below_tcp + config.place_clearance
     place_z = max(place_z, lowest_tcp)
     highest_below = max(obstacle_height if obstacle_height is not None else table_z, obj.top,
                         target_object.top if target_object else table_z)
@@ -476,8 +561,8 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     planner = _Planner(config, current_joints)
     above_object = (obj.position[0], obj.position[1], travel_z)
     grasp_point = (obj.position[0], obj.position[1], grasp_z)
-    above_target = (target_xy[0], target_xy[1], travel_z)
-    place_point = (target_xy[0], target_xy[1], place_z)
+    above_target = (place_xy[0], place_xy[1], travel_z)
+    place_point = (place_xy[0], place_xy[1], place_z)
 
     # Approach: rise straight up first if the gripper is low (it may be among objects), then move above the object.
     approach_steps: list[Step] = [GripperStep(config.gripper_open_width)]
@@ -486,20 +571,29 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
         start_yaw = math.atan2(start_tcp[1, 0], start_tcp[0, 0])
         approach_steps.append(planner.line((start_tcp[0, 3], start_tcp[1, 3], travel_z), start_yaw,
                                            'the travel height'))
-    grasp_yaw = planner.best_yaw(grasp_point, [obj.yaw + q * math.pi / 2 + k * math.pi for q in quarters
-                                               for k in (-1, 0, 1)], f'the {obj.name}')
+    grasp_yaw = _roomiest_yaw(planner, grasp_point, [obj.yaw + q * math.pi / 2 + k * math.pi for q in quarters
+                                                     for k in (-1, 0, 1)],
+                              neighbours, config.gripper_open_width / 2 + config.finger_thickness, config,
+                              f'the {obj.name}')
     approach_steps.append(planner.travel(above_object, grasp_yaw, f'above the {obj.name}', lowest_travel_z))
     descend = planner.line(grasp_point, grasp_yaw, f'the {obj.name}')
     lift = planner.line(above_object, grasp_yaw, f'above the {obj.name}')
 
-    # Keep the held object's faces turned the same way in the world (or square with a target block).
-    base_yaw = target_object.yaw if target_object is not None and target_object.category != CATEGORY_BOWL \
-        else grasp_yaw
-    place_yaw = planner.best_yaw(place_point, [base_yaw + k * math.pi / 2 for k in range(-4, 5)],
-                                 target_description)
+    # Keep the held object's faces turned the same way in the world (or square with the block it goes on), with
+    # the fingers across whichever side has room: a finger that touches a neighbour pushes it out of its place.
+    base_yaw = support.yaw if support is not None and support.category != CATEGORY_BOWL else grasp_yaw
+    yaws = [base_yaw + k * math.pi / 2 for k in range(-4, 5)]
+    below = {thing.name for thing in (support, target_object) if thing is not None}
+    release_width = min(config.gripper_open_width, grasp_width + 2 * config.release_side_room)
+    place_yaw = _roomiest_yaw(planner, place_point, yaws, [other for other in neighbours if other.name not in below],
+                              release_width / 2 + config.finger_thickness, config, target_description)
     move = planner.travel(above_target, place_yaw, f'above {target_description}', lowest_travel_z)
     place = planner.line(place_point, place_yaw, target_description, stop_on_contact=True)
-    retreat = planner.line(above_target, place_yaw, f'above {target_description}')
+    retreat = [planner.line(above_target, place_yaw, f'above {target_description}')]
+    if config.clear_view_from is not None:
+        clear = _clear_view_step(planner, place_xy, travel_z, place_yaw, config)
+        if clear is not None:
+            retreat.append(clear)
 
     tolerance = config.grasp_width_tolerance
     stages = [
@@ -512,9 +606,8 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
               PickPlaceErrorCode.OBJECT_DROPPED),
         Stage(StageName.MOVE, [move], failure_code=PickPlaceErrorCode.IK_FAILED),
         Stage(StageName.PLACE, [place], failure_code=PickPlaceErrorCode.IK_FAILED),
-        Stage(StageName.RELEASE, [GripperStep(min(config.gripper_open_width,
-                                                  grasp_width + 2 * config.release_side_room))]),
-        Stage(StageName.RETREAT, [retreat], [PlacedCheck(obj.name, target_xy, config.place_tolerance)],
+        Stage(StageName.RELEASE, [GripperStep(release_width)]),
+        Stage(StageName.RETREAT, retreat, [PlacedCheck(obj.name, target_xy, config.place_tolerance)],
               PickPlaceErrorCode.OBJECT_DROPPED),
     ]
     for index, stage in enumerate(stages):

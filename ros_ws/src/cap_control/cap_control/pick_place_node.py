@@ -27,8 +27,8 @@ from std_msgs.msg import Empty
 from cap_control import ros_conversions as conv
 from cap_control.kinematics import JOINT_NAMES
 from cap_control.pick_place import (
-    GripperStep, Observation, PickPlaceConfig, PickPlaceError, PickPlaceErrorCode, PickPlacePlan, Stage,
-    TrajectoryStep, Workspace, plan_pick_place,
+    GripperStep, ObjectInfo, Observation, PickPlaceConfig, PickPlaceError, PickPlaceErrorCode, PickPlacePlan,
+    Stage, TrajectoryStep, Workspace, plan_pick_place,
 )
 from cap_control.trajectory import CartesianLimits, UR5E_LIMITS
 from cap_interfaces.action import FollowJointTrajectory, GripperCommand, PickPlace
@@ -37,6 +37,7 @@ from cap_interfaces.srv import GetObjectNames, GetObjectState
 
 TRAJECTORY_SUCCESSFUL = FollowJointTrajectory.Result.SUCCESSFUL
 TRAJECTORY_PATH_TOLERANCE_VIOLATED = FollowJointTrajectory.Result.PATH_TOLERANCE_VIOLATED
+TRAJECTORY_GOAL_TOLERANCE_VIOLATED = FollowJointTrajectory.Result.GOAL_TOLERANCE_VIOLATED
 POLL_PERIOD = 0.005  # [s] between looks at a pending future
 
 
@@ -66,6 +67,13 @@ class PickPlaceNode(Node):
         scale = p('velocity_scale', 1.0, 'Fraction of the UR5e joint speed (180 deg/s) used, in (0, 1].')
         acceleration_scale = p('acceleration_scale', 1.0, 'Fraction of the joint acceleration (3 rad/s^2) and '
                                'jerk (30 rad/s^3) limits used, in (0, 1].')
+        clear_view = p('clear_view', False, 'After placing, move the tool sideways out of the line of sight of '
+                       'the camera at camera_position, so camera-based perception sees what was just placed.')
+        camera = p('camera_position', [0.0, -0.5, 0.85], 'Where the camera perception watches the table from (world '
+                   'frame) [m]; used with clear_view. The default is the simulated top camera.')
+        if clear_view and len(camera) != 3:
+            raise ValueError(f'camera_position must be x, y, z, not {list(camera)}')
+        clear_view_from = tuple(float(v) for v in camera) if clear_view else None
         self.config = PickPlaceConfig(
             workspace=workspace,
             tool_offset=p('tool_offset', 0.15, 'Tool centre point along the flange z axis [m].'),
@@ -75,6 +83,13 @@ class PickPlaceNode(Node):
             grip_force=p('grip_force', 20.0, 'Grip force per finger when grasping [N].'),
             require_stalled=p('require_stalled', True, 'A grasp counts only if the fingers stalled on the object.'),
             place_clearance=p('place_clearance', 0.005, 'Release height above the expected contact [m].'),
+            finger_thickness=p('finger_thickness', 0.014, 'Thickness of a finger outside its pad [m]; grasp and '
+                               'place yaws keep the fingers clear of neighbouring objects.'),
+            finger_room=p('finger_room', 0.03, 'Room beside the fingers beyond which every grasp or place yaw '
+                          'counts as clear [m].'),
+            clear_view_from=clear_view_from,
+            clear_view_distance=p('clear_view_distance', 0.12, 'How far sideways the tool moves after placing to '
+                                  'clear the camera\'s view (with clear_view) [m].'),
             contact_tolerance=p('contact_tolerance', 0.002, 'Joint tracking error read as contact while placing '
                                 '[rad] (sent as the path tolerance of the place descent).'),
             place_tolerance=p('place_tolerance', 0.08, 'Largest xy distance of the placed object from the target '
@@ -100,10 +115,7 @@ class PickPlaceNode(Node):
         self.create_subscription(JointState, GraphNames.JOINT_STATES_TOPIC, self._on_joint_state, 10,
                                  callback_group=callbacks)
         self.create_subscription(Empty, GraphNames.STOP_TOPIC, self._on_stop, 10, callback_group=callbacks)
-        self._state_client = self.create_client(GetObjectState, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE,
-                                                callback_group=callbacks)
-        self._names_client = self.create_client(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE,
-                                                callback_group=callbacks)
+        self._create_perception_clients(self)
         self._arm = ActionClient(self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION,
                                  callback_group=callbacks)
         self._gripper = ActionClient(self, GripperCommand, GraphNames.SIM_GRIPPER_ACTION, callback_group=callbacks)
@@ -111,6 +123,26 @@ class PickPlaceNode(Node):
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                     callback_group=callbacks)
         self.get_logger().info(f'pick-and-place ready; workspace {workspace.describe()}')
+
+    def _create_perception_clients(self, node) -> None:
+        group = ReentrantCallbackGroup()
+        self._state_client = node.create_client(GetObjectState, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE,
+                                                callback_group=group)
+        self._names_client = node.create_client(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE,
+                                                callback_group=group)
+
+    def bind_perception_clients(self, node) -> None:
+        """Move the perception clients onto `node` (call before the first goal).
+
+        The middleware hands each perception answer to every client of that service in the process, and each
+        client then wakes its executor. A graph that composes this node with lmp_node binds these clients to a node
+        on its events executor, so that the robot API's many perception calls do not wake the multi-threaded
+        executor (a whole Python wait set rebuilt each time) through these idle clients.
+        """
+        old = (self._state_client, self._names_client)
+        self._create_perception_clients(node)
+        for client in old:
+            self.destroy_client(client)
 
     def _parameter(self, name: str, default, description: str):
         return self.declare_parameter(name, default, ParameterDescriptor(description=description)).value
@@ -179,23 +211,24 @@ class PickPlaceNode(Node):
                               self._service_timeout, goal_handle, 'perception')
         return response
 
-    def _obstacle_height(self, goal_handle, exclude: str) -> float | None:
-        """Top of the tallest other object in view, so that the carried object passes over everything.
+    def _objects_in_view(self, goal_handle, exclude: str) -> list[ObjectInfo] | None:
+        """The other objects in view: the carried object passes over them and the fingers keep clear of them.
 
         Objects perception only remembers (not in view now) are left out: their last known place may be stale.
+        None when perception cannot list them.
         """
         if not self._names_client.service_is_ready():
             return None
         names = self._wait(self._names_client.call_async(GetObjectNames.Request(visible_only=True)),
                            self._service_timeout, goal_handle, 'perception').names
-        tops = []
+        others = []
         for name in names:
             if name == exclude:
                 continue
             response = self._object_state(name, goal_handle)
             if response.success and response.state.visible:
-                tops.append(response.state.bbox_max.z)
-        return max(tops) if tops else None
+                others.append(conv.object_info(response.state))
+        return others
 
     # ------------------------------------------------------------------------------------------- execution
     def _execute(self, goal_handle) -> PickPlace.Result:
@@ -248,8 +281,10 @@ class PickPlaceNode(Node):
             target = conv.object_info(target_found.state)
         else:
             target = (request.target_position.x, request.target_position.y)
-        obstacle_height = self._obstacle_height(goal_handle, obj.name)
-        return plan_pick_place(obj, target, self._current_joints(goal_handle), self.config, obstacle_height)
+        others = self._objects_in_view(goal_handle, obj.name)
+        obstacle_height = max((other.top for other in others), default=None) if others is not None else None
+        return plan_pick_place(obj, target, self._current_joints(goal_handle), self.config, obstacle_height,
+                               others or ())
 
     def _run(self, plan: PickPlacePlan, goal_handle) -> None:
         observation = Observation()
@@ -282,8 +317,10 @@ class PickPlaceNode(Node):
         code = response.result.error_code
         if code == TRAJECTORY_SUCCESSFUL:
             return
-        if step.stop_on_contact and code == TRAJECTORY_PATH_TOLERANCE_VIOLATED:
-            return  # touched down before the planned height: placing ends here
+        if step.stop_on_contact and code in (TRAJECTORY_PATH_TOLERANCE_VIOLATED, TRAJECTORY_GOAL_TOLERANCE_VIOLATED):
+            # Touched down before the planned height (on the way, or in the last millimetres, where the arm ends
+            # a few milliradians short of its goal): placing ends here.
+            return
         raise _Failed(PickPlaceErrorCode.UNKNOWN, f'the arm did not complete its motion: '
                       f'{response.result.error_string or f"error code {code}"}')
 

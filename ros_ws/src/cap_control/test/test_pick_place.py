@@ -94,6 +94,63 @@ def test_place_height_stacks_on_blocks_drops_into_bowls_and_sets_down_on_the_tab
         assert 0.0 < held_bottom <= 0.01, 'released just above the table'
 
 
+def test_a_block_goes_into_a_bowl_squarely_on_top_of_the_blocks_already_there():
+    red = block('red block', 0.15, -0.45)
+    blue_bowl = bowl('blue bowl', -0.1, -0.65)
+    inside = [block('green block', -0.09, -0.655, yaw=0.3, z=0.026), block('yellow block', -0.092, -0.652, yaw=0.31,
+                                                                         z=0.066)]
+    outside = block('pink block', 0.1, -0.3, z=0.1)  # taller, but not in the bowl
+    plan = plan_pick_place(red, blue_bowl, HOME_JOINTS, neighbours=inside + [outside, red])
+    place_pose = forward_kinematics(stage(plan, StageName.PLACE).steps[0].trajectory.end)
+    np.testing.assert_allclose(place_pose[:2, 3], [-0.092, -0.652], atol=1e-6)
+    held_bottom = place_pose[2, 3] - (plan.grasp_z - red.bottom)
+    assert 0.0 < held_bottom - inside[1].top <= 0.01, 'released just above the top block'
+    yaw = math.atan2(place_pose[1, 0], place_pose[0, 0])
+    assert math.remainder(yaw - 0.31, math.pi / 2) == pytest.approx(0.0, abs=1e-6), 'square with the top block'
+    # An empty bowl: dropped at its centre, near its floor.
+    plan = plan_pick_place(red, blue_bowl, HOME_JOINTS, neighbours=[outside])
+    np.testing.assert_allclose(forward_kinematics(stage(plan, StageName.PLACE).steps[0].trajectory.end)[:2, 3],
+                               [-0.1, -0.65], atol=1e-6)
+
+
+@pytest.mark.parametrize('neighbour_xy', [(0.07, 0.0), (0.0, 0.07), (-0.065, 0.0), (0.0, -0.065)])
+def test_the_fingers_close_across_the_side_with_room_when_a_neighbour_stands_close(neighbour_xy):
+    red = block('red block', 0.15, -0.45)
+    spot = (-0.05, -0.55)
+    neighbour = block('blue block', spot[0] + neighbour_xy[0], spot[1] + neighbour_xy[1])
+    plan = plan_pick_place(red, spot, HOME_JOINTS, neighbours=[neighbour])
+    place_pose = forward_kinematics(stage(plan, StageName.PLACE).steps[0].trajectory.end)
+    finger_axis = place_pose[:2, 1]  # the fingers close along the TCP y axis
+    towards = np.array(neighbour_xy) / np.linalg.norm(neighbour_xy)
+    assert abs(float(finger_axis @ towards)) < 0.75, 'the fingers do not point at the neighbour'
+    # Alone, the place yaw is the grasp yaw (no wrist turn needed).
+    alone = plan_pick_place(red, spot, HOME_JOINTS)
+    assert math.remainder(alone.place_yaw - alone.grasp_yaw, math.pi / 2) == pytest.approx(0.0, abs=1e-6)
+    # The open fingers come down beside the block to pick, not onto its neighbour.
+    beside = block('green block', red.position[0] + neighbour_xy[0], red.position[1] + neighbour_xy[1])
+    plan = plan_pick_place(red, spot, HOME_JOINTS, neighbours=[beside])
+    grasp_pose = forward_kinematics(stage(plan, StageName.DESCEND).steps[0].trajectory.end)
+    assert abs(float(grasp_pose[:2, 1] @ towards)) < 0.75
+
+
+@pytest.mark.parametrize('spot', [(0.0, -0.5), (-0.28, -0.78), (0.28, -0.22), (0.25, -0.5)])
+def test_with_a_camera_to_clear_the_tool_ends_out_of_its_line_of_sight_to_the_placed_block(spot):
+    camera = (0.0, -0.5, 0.85)
+    red = block('red block', 0.15, -0.45)
+    config = PickPlaceConfig(clear_view_from=camera)
+    plan = plan_pick_place(red, spot, HOME_JOINTS, config)
+    steps = stage(plan, StageName.RETREAT).steps
+    assert len(steps) == 2
+    tcp = forward_kinematics(steps[-1].trajectory.end)[:3, 3]
+    assert tcp[2] == pytest.approx(plan.travel_z, abs=1e-3)
+    # The line of sight from the camera to the block, at the tool's height, passes well beside the tool.
+    block_top = np.array([spot[0], spot[1], 0.04])
+    at_tool_height = block_top + (np.array(camera) - block_top) * (tcp[2] - 0.04) / (camera[2] - 0.04)
+    assert np.linalg.norm(at_tool_height[:2] - tcp[:2]) > 0.1
+    # Without a camera to clear, the tool waits above the block.
+    assert len(stage(plan_pick_place(red, spot, HOME_JOINTS), StageName.RETREAT).steps) == 1
+
+
 def test_the_held_block_passes_high_over_everything_while_moving():
     red = block('red block', 0.2, -0.75)
     tall_stack_top = 0.12

@@ -63,7 +63,8 @@ class GraphOptions:
             'sim_bridge': {'seed': self.seed, 'objects': self.objects, 'real_time': self.real_time,
                            'camera_rate': self.camera_rate},
             'perception_node': {'source': self.perception},
-            'pick_place': {},
+            # A camera sees a fresh stack only once the tool has moved out of its line of sight.
+            'pick_place': {'clear_view': self.perception == 'rgbd'},
             'lmp_node': lmp,
         }
         for node, parameters in self.extra.items():
@@ -135,6 +136,7 @@ class Graph:
         self.executor = MultiThreadedExecutor(num_threads=num_threads, context=context)
         self._quick = EventsSpinner(context, 'graph_events_executor')
         self.api_node = None  # the robot API's clients, on the events executor
+        self.control_clients_node = None  # pick-and-place's perception clients, on the events executor
         try:
             for node_name, package, config_file, module_name, class_name in NODES:
                 node_class = getattr(importlib.import_module(module_name), class_name)
@@ -145,9 +147,14 @@ class Graph:
                     Parameter(name, value=value) for name, value in values.items()])
                 self.nodes[node_name] = node
                 (self._quick.executor if is_quick(node_name, values) else self.executor).add_node(node)
+            # Perception's answers reach every client of its services in the process, waking each client's
+            # executor: all of them live on the events executor, where a wake-up for another client is cheap.
             self.api_node = rclpy.create_node('lmp_node_robot_api', context=context)
             self._quick.executor.add_node(self.api_node)
             self.nodes['lmp_node'].robot.bind_clients(self.api_node)
+            self.control_clients_node = rclpy.create_node('pick_place_perception_clients', context=context)
+            self._quick.executor.add_node(self.control_clients_node)
+            self.nodes['pick_place'].bind_perception_clients(self.control_clients_node)
         except Exception:
             self._quick.close()
             self._destroy_nodes()
@@ -162,7 +169,8 @@ class Graph:
         return self.nodes['sim_bridge'].world
 
     def _destroy_nodes(self) -> None:
-        nodes = list(self.nodes.values()) + ([self.api_node] if self.api_node is not None else [])
+        nodes = list(self.nodes.values()) + [node for node in (self.control_clients_node, self.api_node)
+                                             if node is not None]
         for node in reversed(nodes):
             try:
                 node.destroy_node()
