@@ -28,7 +28,7 @@ from cap_control import ros_conversions as conv
 from cap_control.kinematics import JOINT_NAMES
 from cap_control.pick_place import (
     GripperStep, ObjectInfo, Observation, PickPlaceConfig, PickPlaceError, PickPlaceErrorCode, PickPlacePlan,
-    Stage, TrajectoryStep, Workspace, plan_pick_place,
+    Stage, StageName, TrajectoryStep, Workspace, plan_pick_place,
 )
 from cap_control.trajectory import CartesianLimits, UR5E_LIMITS
 from cap_interfaces.action import FollowJointTrajectory, GripperCommand, PickPlace
@@ -105,6 +105,8 @@ class PickPlaceNode(Node):
         self._motion_timeout_margin = p('motion_timeout_margin', 30.0, 'Wall time allowed beyond a motion\'s '
                                         'planned duration before TIMEOUT [s].')
         self._gripper_timeout = p('gripper_timeout', 15.0, 'Longest wait for a gripper command [s].')
+        self._view_timeout = p('view_timeout', 3.0, 'With clear_view: longest wait for perception to answer from an '
+                               'observation made after the tool cleared the camera\'s view [s].')
 
         callbacks = ReentrantCallbackGroup()
         self._joint_lock = threading.Lock()
@@ -296,6 +298,8 @@ class PickPlaceNode(Node):
                     self._move(plan, step, goal_handle)
                 else:
                     self._grip(step, goal_handle, observation)
+            if stage.name == StageName.RETREAT and self.config.clear_view_from is not None:
+                self._wait_for_fresh_view(plan.object.name, goal_handle)
             self._check(plan, stage, goal_handle, observation)
             done = stage.progress
         goal_handle.publish_feedback(PickPlace.Feedback(stage=plan.stages[-1].name.value, progress=1.0))
@@ -323,6 +327,29 @@ class PickPlaceNode(Node):
             return
         raise _Failed(PickPlaceErrorCode.UNKNOWN, f'the arm did not complete its motion: '
                       f'{response.result.error_string or f"error code {code}"}')
+
+    def _wait_for_fresh_view(self, name: str, goal_handle) -> None:
+        """Wait until perception answers from an observation made after the tool cleared the camera's view.
+
+        Otherwise the check below, and the next command, would see the placed object where the camera last saw it.
+        """
+        with self._joint_lock:
+            msg = self._joint_state
+        if msg is None:
+            return
+        cleared_at = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        deadline = time.monotonic() + self._view_timeout
+        while True:
+            response = self._object_state(name, goal_handle)
+            if response.stamp.sec + response.stamp.nanosec * 1e-9 >= cleared_at:
+                return
+            if time.monotonic() > deadline:
+                self.get_logger().warning(f'perception saw nothing newer than the place within '
+                                          f'{self._view_timeout:.0f} s; going on with what it has')
+                return
+            if goal_handle.is_cancel_requested or self._stop_requested.is_set():
+                raise _Interrupted()
+            time.sleep(0.02)  # a camera frame comes every 0.1 s at most
 
     def _grip(self, step: GripperStep, goal_handle, observation: Observation) -> None:
         self._wait_until(self._gripper.server_is_ready, goal_handle,

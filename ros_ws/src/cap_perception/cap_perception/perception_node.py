@@ -13,6 +13,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from scipy.spatial.transform import Rotation
@@ -41,6 +42,11 @@ def _pose_matrix(position, orientation_xyzw) -> np.ndarray:
 
 def _stamp_seconds(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
+def _time_msg(seconds: float) -> Time:
+    whole = int(seconds)
+    return Time(sec=whole, nanosec=int(round((seconds - whole) * 1e9)) % 1_000_000_000)
 
 
 class PerceptionNode(Node):
@@ -165,7 +171,9 @@ class PerceptionNode(Node):
 
     def _on_state(self, request: GetObjectState.Request, response: GetObjectState.Response):
         try:
-            response.state = to_msg(self.source.state(request.name))
+            state, stamp = self.source.stamped_state(request.name)
+            response.state = to_msg(state)
+            response.stamp = _time_msg(stamp)
             response.success = True
         except (UnknownObjectError, NoObservationError) as error:
             response.success = False

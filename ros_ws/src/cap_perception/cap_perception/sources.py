@@ -49,11 +49,14 @@ class SnapshotSource:
             return self._stamp
 
     def _snapshot(self) -> dict[str, PerceivedObject]:
+        return self._stamped_snapshot()[0]
+
+    def _stamped_snapshot(self) -> tuple[dict[str, PerceivedObject], float]:
         with self._lock:
-            objects = self._objects
+            objects, stamp = self._objects, self._stamp
         if objects is None:
             raise NoObservationError(f'No objects observed yet from {self.description}; is it running?')
-        return objects
+        return objects, stamp
 
     def names(self, visible_only: bool = False) -> list[str]:
         """Canonical names, sorted."""
@@ -61,8 +64,12 @@ class SnapshotSource:
 
     def state(self, name: str) -> PerceivedObject:
         """The object `name` refers to ("the red block", "red_block", ...); UnknownObjectError otherwise."""
-        objects = self._snapshot()
-        return objects[resolve_name(name, objects)]
+        return self.stamped_state(name)[0]
+
+    def stamped_state(self, name: str) -> tuple[PerceivedObject, float]:
+        """`state(name)` and the time of the observation it comes from (one snapshot, read at once)."""
+        objects, stamp = self._stamped_snapshot()
+        return objects[resolve_name(name, objects)], stamp
 
     def objects(self) -> list[PerceivedObject]:
         """Every object of the latest snapshot (empty before the first observation)."""

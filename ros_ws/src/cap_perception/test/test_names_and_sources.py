@@ -40,6 +40,7 @@ def test_snapshot_source_answers_from_its_latest_update():
     assert source.names() == ['blue bowl', 'red block']
     assert source.names(visible_only=True) == ['red block']
     assert source.state('the Red_Block').bbox_min == pytest.approx((0.08, -0.52, 0.0))
+    assert source.stamped_state('red block') == (red, 2.5)
     source.update([hidden], stamp=3.0)
     with pytest.raises(UnknownObjectError):
         source.state('red block')

@@ -45,6 +45,7 @@ def test_ground_truth_objects_are_served_by_name(ros_context, graph, spin_until)
     simulator = user.create_publisher(ObjectArray, GraphNames.SIM_OBJECTS_TOPIC, OBJECTS_QOS)
     array = ObjectArray()
     array.header.frame_id = 'world'
+    array.header.stamp.sec, array.header.stamp.nanosec = 12, 500_000_000
     array.objects = [to_msg(PerceivedObject.from_fields('red', 'block', (0.1, -0.5, 0.02), (0.04,) * 3)),
                      to_msg(PerceivedObject.from_fields('blue', 'bowl', (-0.1, -0.4, 0.03), (0.14, 0.14, 0.06)))]
     assert spin_until(executor, lambda: simulator.get_subscription_count() == 1)
@@ -56,6 +57,7 @@ def test_ground_truth_objects_are_served_by_name(ros_context, graph, spin_until)
     assert answer.success
     assert (answer.state.position.x, answer.state.position.y) == pytest.approx((0.1, -0.5))
     assert answer.state.bbox_max.z == pytest.approx(0.04)
+    assert (answer.stamp.sec, answer.stamp.nanosec) == (12, 500_000_000), 'the time of the observation'
 
     unknown = _call(executor, spin_until, state, GetObjectState.Request(name='green block'))
     assert not unknown.success
