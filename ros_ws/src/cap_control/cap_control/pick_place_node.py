@@ -337,11 +337,11 @@ class PickPlaceNode(Node):
             msg = self._joint_state
         if msg is None:
             return
-        cleared_at = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        cleared_at = conv.seconds(msg.header.stamp)
         deadline = time.monotonic() + self._view_timeout
         while True:
             response = self._object_state(name, goal_handle)
-            if response.stamp.sec + response.stamp.nanosec * 1e-9 >= cleared_at:
+            if conv.seconds(response.stamp) >= cleared_at:
                 return
             if time.monotonic() > deadline:
                 self.get_logger().warning(f'perception saw nothing newer than the place within '

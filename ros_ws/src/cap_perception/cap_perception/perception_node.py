@@ -13,7 +13,6 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from scipy.spatial.transform import Rotation
@@ -23,7 +22,7 @@ from std_srvs.srv import Trigger
 from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 from cap_perception.rgbd_detector import CameraView, DetectorConfig, detect
-from cap_perception.ros_conversions import from_msg, image_to_array, to_msg
+from cap_perception.ros_conversions import from_msg, image_to_array, time_msg, to_msg
 from cap_perception.sources import (CameraMemory, NoObservationError, SnapshotSource, UnknownObjectError,
                                     load_stub_objects)
 
@@ -42,11 +41,6 @@ def _pose_matrix(position, orientation_xyzw) -> np.ndarray:
 
 def _stamp_seconds(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
-
-
-def _time_msg(seconds: float) -> Time:
-    whole = int(seconds)
-    return Time(sec=whole, nanosec=int(round((seconds - whole) * 1e9)) % 1_000_000_000)
 
 
 class PerceptionNode(Node):
@@ -173,7 +167,7 @@ class PerceptionNode(Node):
         try:
             state, stamp = self.source.stamped_state(request.name)
             response.state = to_msg(state)
-            response.stamp = _time_msg(stamp)
+            response.stamp = time_msg(stamp)
             response.success = True
         except (UnknownObjectError, NoObservationError) as error:
             response.success = False

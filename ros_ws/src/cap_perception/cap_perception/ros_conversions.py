@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from cap_interfaces.msg import ObjectState
 from geometry_msgs.msg import Point, Quaternion
 from std_msgs.msg import ColorRGBA
@@ -50,3 +51,9 @@ def image_to_array(msg) -> np.ndarray:
         image = rows[:, :msg.width * dtype.itemsize].copy().view(dtype).reshape(msg.height, msg.width)
         return image.astype(np.float32) / (1000.0 if encoding == '16uc1' else 1.0)
     raise ValueError(f'unsupported image encoding {msg.encoding!r}; expected rgb8, bgr8, 32FC1 or 16UC1')
+
+
+def time_msg(seconds: float) -> Time:
+    """Seconds as a builtin_interfaces/Time (whole nanoseconds, so the fraction never rounds up to a second)."""
+    nanoseconds = int(round(seconds * 1e9))
+    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
