@@ -190,7 +190,7 @@ class PickPlaceConfig:
     # moves this far sideways at travel height, out of that camera's line of sight to what it just placed, so that
     # perception sees the new stack rather than remembering its blocks where they were.
     clear_view_from: tuple[float, float, float] | None = None
-    clear_view_distance: float = 0.12
+    clear_view_distance: float = 0.20  # [m]; 0.12 left far targets on the centre line hidden by the forearm
     # Tracking error [rad] that the executor reads as contact during a stop-on-contact descent.
     contact_tolerance: float = 0.002
     # After retreating, the object must lie this close (xy) to the target; farther, it was dropped on the way.

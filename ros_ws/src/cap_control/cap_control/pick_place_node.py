@@ -88,7 +88,7 @@ class PickPlaceNode(Node):
             finger_room=p('finger_room', 0.03, 'Room beside the fingers beyond which every grasp or place yaw '
                           'counts as clear [m].'),
             clear_view_from=clear_view_from,
-            clear_view_distance=p('clear_view_distance', 0.12, 'How far sideways the tool moves after placing to '
+            clear_view_distance=p('clear_view_distance', 0.20, 'How far sideways the tool moves after placing to '
                                   'clear the camera\'s view (with clear_view) [m].'),
             contact_tolerance=p('contact_tolerance', 0.002, 'Joint tracking error read as contact while placing '
                                 '[rad] (sent as the path tolerance of the place descent).'),
@@ -341,7 +341,12 @@ class PickPlaceNode(Node):
         deadline = time.monotonic() + self._view_timeout
         while True:
             response = self._object_state(name, goal_handle)
+            if not response.success:
+                return  # perception no longer knows it: the check below says so
             if conv.seconds(response.stamp) >= cleared_at:
+                if not response.state.visible:
+                    self.get_logger().warning(f'the {name} is out of the camera\'s sight after placing; its '
+                                              f'position is the one last seen')
                 return
             if time.monotonic() > deadline:
                 self.get_logger().warning(f'perception saw nothing newer than the place within '

@@ -98,13 +98,16 @@ class PerceptionNode(Node):
         self._frames_lock = threading.Lock()
         self._color: Image | None = None
         self._depth: Image | None = None
+        # When each image reached this process (local wall clock, ns): not the sender's clock, which may differ.
+        self._color_received_ns = self._depth_received_ns = 0
         self._camera_matrix: np.ndarray | None = None
         prefix = f'{GraphNames.CAMERA_NAMESPACE}/{camera}'
         # Images are sensor data: the latest frame matters, a lost one is replaced by the next.
         images = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Image, f'{prefix}/color', lambda m: self._on_image('color', m),
+        # With the message info: a frame received before a forget shows the old scene (see CameraMemory).
+        self.create_subscription(Image, f'{prefix}/color', lambda m, info: self._on_image('color', m, info),
                                  qos_profile_sensor_data, callback_group=images)
-        self.create_subscription(Image, f'{prefix}/depth', lambda m: self._on_image('depth', m),
+        self.create_subscription(Image, f'{prefix}/depth', lambda m, info: self._on_image('depth', m, info),
                                  qos_profile_sensor_data, callback_group=images)
         self.create_subscription(CameraInfo, f'{prefix}/camera_info', self._on_camera_info,
                                  qos_profile_sensor_data, callback_group=images)
@@ -122,16 +125,18 @@ class PerceptionNode(Node):
     def _on_camera_info(self, msg: CameraInfo) -> None:
         self._camera_matrix = np.array(msg.k, dtype=float).reshape(3, 3)
 
-    def _on_image(self, kind: str, msg: Image) -> None:
+    def _on_image(self, kind: str, msg: Image, info: dict) -> None:
         with self._frames_lock:
             setattr(self, f'_{kind}', msg)
+            setattr(self, f'_{kind}_received_ns', int(info.get('received_timestamp') or 0))
             color, depth = self._color, self._depth
+            received_ns = min(self._color_received_ns, self._depth_received_ns)
         # Colour and depth of one frame carry the same stamp; analyse each frame once.
         if (color is None or depth is None or self._camera_matrix is None or self._world_from_optical is None
                 or color.header.stamp != depth.header.stamp):
             return
         stamp = _stamp_seconds(color.header)
-        token = self._memory.begin(stamp)
+        token = self._memory.begin(stamp, received_ns or None)
         if token is None:
             return
         try:

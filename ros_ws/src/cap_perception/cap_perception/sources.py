@@ -8,7 +8,8 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 import threading
-from typing import Iterable, Sequence
+import time
+from typing import Callable, Iterable, Sequence
 
 import yaml
 
@@ -91,27 +92,37 @@ def remember_unseen(previous: Iterable[PerceivedObject], seen: Iterable[Perceive
 class CameraMemory:
     """Feeds a SnapshotSource from camera frames: each frame's objects plus those it no longer sees.
 
-    Objects do not vanish when occluded (remember_unseen). `forget()` (after a scene reset) clears them, and races
-    with frames of the old scene still queued or being analysed: each forget starts a new generation, an analysis
-    begun before it is dropped, and the first `settle_frames` frames after it, and those within `settle_s` of frame
-    time of the first, replace the objects instead of adding to the remembered ones, so a queued old frame cannot
-    leave old objects behind for good. Thread-safe.
+    Objects do not vanish when occluded (remember_unseen). `forget()` (after a scene reset) clears them, and must not
+    let frames of the old scene back in:
+    - a frame received before the forget (still queued when it came) is dropped: `begin` takes the time the frame
+      reached this process on the local wall clock, which the forget is compared against;
+    - an analysis begun before the forget is dropped (each forget starts a new generation);
+    - as a second guard, frames within `settle_s` of frame time after the first accepted one, and the first frame
+      past that, replace the objects instead of adding to them.
+    The replacing window is bounded in frame time, not in frames: counted in analysed frames it stretched over
+    seconds of a slow detector's time, and a frame taken while the arm hid an object then dropped that object.
+    Thread-safe.
     """
 
-    def __init__(self, source: SnapshotSource, settle_s: float = 1.0, settle_frames: int = 8) -> None:
+    def __init__(self, source: SnapshotSource, settle_s: float = 1.0,
+                 wall_clock_ns: Callable[[], int] = time.time_ns) -> None:
         self.source = source
         self.settle_s = settle_s
-        self.settle_frames = settle_frames  # more than the image subscriptions queue
+        self._wall_clock_ns = wall_clock_ns
         self._lock = threading.Lock()
         self._last_stamp = -1.0
         self._generation = 0
+        self._forgot_at_ns = 0
         self._replace_until: float | None = None
-        self._frames_since_forget = 0
+        self._settling = True
 
-    def begin(self, stamp: float) -> int | None:
-        """A token for analysing the frame stamped `stamp`, or None if a frame as new was already taken."""
+    def begin(self, stamp: float, received_ns: int | None = None) -> int | None:
+        """A token for analysing the frame stamped `stamp` (received at local wall time `received_ns`, if known),
+        or None if it is not worth analysing: a frame as new was already taken, or it came before a forget."""
         with self._lock:
             if stamp <= self._last_stamp:
+                return None
+            if received_ns is not None and received_ns < self._forgot_at_ns:
                 return None
             self._last_stamp = stamp
             return self._generation
@@ -121,18 +132,21 @@ class CameraMemory:
         with self._lock:
             if token != self._generation:
                 return  # analysed a frame from before a forget
-            if self._replace_until is None:
-                self._replace_until = stamp + self.settle_s
-            self._frames_since_forget += 1
-            settling = stamp < self._replace_until or self._frames_since_forget <= self.settle_frames
-            self.source.update(detected if settling else remember_unseen(self.source.objects(), detected), stamp)
+            if self._settling:
+                if self._replace_until is None:
+                    self._replace_until = stamp + self.settle_s
+                self._settling = stamp < self._replace_until
+                self.source.update(detected, stamp)
+            else:
+                self.source.update(remember_unseen(self.source.objects(), detected), stamp)
 
     def forget(self) -> None:
-        """Forget every object; answers wait for the next frame."""
+        """Forget every object; answers wait for the next frame received after this call."""
         with self._lock:
             self._generation += 1
+            self._forgot_at_ns = self._wall_clock_ns()
             self._replace_until = None
-            self._frames_since_forget = 0
+            self._settling = True
             self.source.clear()
 
 
