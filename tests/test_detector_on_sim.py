@@ -35,7 +35,8 @@ def test_twenty_random_scenes_no_missed_or_phantom_objects_and_centimetre_accura
 
 
 
-@pytest.mark.parametrize('spot', [(0.0, -0.75), (0.05, -0.7), (0.0, -0.65), (-0.2, -0.6), (0.2, -0.3), (0.0, -0.4)])
+@pytest.mark.parametrize('spot', [(0.0, -0.75), (0.05, -0.7), (0.0, -0.65), (-0.2, -0.6), (0.2, -0.3), (0.0, -0.4),
+                                  (-0.25, -0.25), (0.0, -0.25)])
 def test_after_placing_the_clear_view_move_leaves_the_placed_block_in_the_top_cameras_sight(world, spot):
     # With perception from the top camera, pick-and-place ends each place by moving the tool out of the camera's
     # line of sight; on the far half of the table's centre line a short move left the block behind the forearm.

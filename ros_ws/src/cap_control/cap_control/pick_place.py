@@ -466,12 +466,16 @@ def _roomiest_yaw(planner: '_Planner', xyz: Sequence[float], yaws: Sequence[floa
         return planner.best_yaw(xyz, yaws, what)
 
 
+CLEAR_VIEW_MIN_REACH = 0.3  # [m] from the base axis; the table's near edge is 0.2 m out
+
+
 def _clear_view_step(planner: '_Planner', place_xy: Sequence[float], travel_z: float, yaw: float,
                      config: PickPlaceConfig) -> TrajectoryStep | None:
     """A straight move at travel height that takes the tool out of the camera's line of sight to `place_xy`.
 
     Sideways across the line from the camera, first to the side nearer the robot's base (easier to reach), else
-    the other side, else straight away from the camera; None if none of them can be reached.
+    the other side, else straight away from the camera, but never within CLEAR_VIEW_MIN_REACH of the base; None if
+    none of them can be reached.
     """
     camera = np.asarray(config.clear_view_from[:2], dtype=float)
     target = np.asarray(place_xy[:2], dtype=float)
@@ -480,7 +484,10 @@ def _clear_view_step(planner: '_Planner', place_xy: Sequence[float], travel_z: f
     across = np.array([-away[1], away[0]])
     sides = sorted((target + config.clear_view_distance * across, target - config.clear_view_distance * across),
                    key=lambda point: float(np.linalg.norm(point)))
-    for point in [*sides, target + config.clear_view_distance * away]:
+    # Not close in to the base: folded up there, the arm's next travel sweeps low across the table.
+    points = [point for point in [*sides, target + config.clear_view_distance * away]
+              if np.linalg.norm(point) >= CLEAR_VIEW_MIN_REACH]
+    for point in points:
         try:
             return planner.line((float(point[0]), float(point[1]), travel_z), yaw, 'out of the camera\'s view')
         except PickPlaceError:

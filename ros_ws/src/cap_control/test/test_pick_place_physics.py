@@ -168,3 +168,19 @@ def test_descent_stops_on_contact_when_the_target_is_taller_than_perceived(world
     red, green_now = world.object_state('red block'), world.object_state('green block')
     assert math.dist(red.position[:2], green_now.position[:2]) < 0.04
     assert red.position[2] == pytest.approx(green_now.position[2] + 0.04, abs=0.005)
+
+
+@pytest.mark.parametrize('corner', [(-0.25, -0.25), (-0.212, -0.25), (0.2, -0.3)])
+def test_after_clearing_the_cameras_view_near_the_base_the_next_pick_still_succeeds(corner):
+    # The clear-view move once ended folded up close to the base (0.14 m out); the next travel from there swept
+    # low across the table and knocked the next block away from the fingers.
+    from cap_control.pick_place import PickPlaceConfig
+
+    world = TabletopWorld(objects=[ObjectSpec('brown block', 'block', 'brown', (0.15, -0.6)),
+                                   ObjectSpec('cyan block', 'block', 'cyan', (0.006, -0.377))])
+    config = PickPlaceConfig(clear_view_from=(0.0, -0.5, 0.85))
+    for name, target in (('brown block', corner), ('cyan block', (0.25, -0.75))):
+        plan = plan_pick_place(object_info(world, name), target, world.joint_positions(), config)
+        code, message, _ = execute(world, plan)
+        assert code == PickPlaceErrorCode.NONE, f'{name}: {message}'
+        assert math.dist(world.object_state(name).position[:2], target) < 0.02
