@@ -93,7 +93,7 @@ def isolated_overhead_ms(path: Path, n: int, warmup: int) -> dict:
         return lambda *args, **kwargs: getattr(current['table'], name)(*args, **kwargs)
 
     api = {name: bound(name) for name in current['table'].api()}
-    engine = IsolatedEngine(api, {'cassette': str(path)})
+    engine = IsolatedEngine(api, CassetteClient(path))
     overhead_ms = []
     try:
         for i in range(warmup + n):

@@ -134,6 +134,8 @@ class CassetteClient:
     mode 'replay': offline; a missing entry raises CassetteMissError naming the LMP and the query.
     mode 'record': answers from the cassette when it can, otherwise asks `backend` and stores the answer with its
     provenance ('recorded from <model>'); the file is saved after every new entry.
+    A request's `time_budget_s` does not apply to replay (answering from the file takes no model time); in record
+    mode the backend honours it.
     """
 
     def __init__(self, path: str | os.PathLike[str], mode: str = 'replay', backend: LLMClient | None = None) -> None:

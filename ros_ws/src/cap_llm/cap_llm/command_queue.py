@@ -2,6 +2,10 @@
 
 Plain Python (no rclpy) so the rule is tested on its own. A command that finds the queue full is refused at once;
 a stop empties the queue as well as ending the running command.
+
+A command is one instruction: `normalise_command` puts it on one line (every run of white space and control
+characters becomes one space) before it can reach a prompt, where a newline would start a second instruction.
+An empty command, or one longer than MAX_COMMAND_CHARS once normalised, is refused with a message saying so.
 """
 from __future__ import annotations
 
@@ -10,6 +14,24 @@ import itertools
 import threading
 from dataclasses import dataclass, field
 from typing import Any
+
+from cap_llm.safe_text import one_line, wire_text
+
+MAX_COMMAND_CHARS = 1000  # of a normalised command: an instruction of a sentence or a few, not a document
+_SHOWN_CHARS = 200  # of a refused over-long command, in its refusal
+
+
+def normalise_command(text: Any) -> tuple[str, str]:
+    """(the command on one line, the reason it is refused or '')."""
+    if not isinstance(text, str):
+        return '', 'refused: a command is text'
+    command = one_line(text, limit=len(text))
+    if not command:
+        return '', 'refused: the command is empty'
+    if len(command) > MAX_COMMAND_CHARS:
+        return (wire_text(command, _SHOWN_CHARS),
+                f'refused: the command is {len(command)} characters long; the limit is {MAX_COMMAND_CHARS}')
+    return command, ''
 
 
 @dataclass
@@ -23,6 +45,7 @@ class Job:
     result: Any = None  # the engine's CommandResult, or None when dropped before running
     goal_handle: Any = None  # the /cap/execute goal waiting for this job, if it came as one
     outcome: str = ''  # 'done', 'error', 'cancelled', 'refused'
+    refusal: str = ''  # why it was refused without running, in words
 
 
 class CommandQueue:
@@ -35,10 +58,17 @@ class CommandQueue:
         self._closed = False
 
     def submit(self, command: str, source: str, goal_handle: Any = None) -> tuple[Job, bool]:
-        """A new job and whether it was queued (False: refused, the queue is full)."""
+        """A new job and whether it was queued (False: refused; `job.refusal` says why)."""
+        command, refusal = normalise_command(command)
         with self._condition:
             job = Job(command_id=f'cmd-{next(self._ids)}', command=command, source=source, goal_handle=goal_handle)
-            if len(self._waiting) >= self.max_waiting or self._closed:
+            if not refusal and self._closed:
+                refusal = 'refused: lmp_node is shutting down'
+            elif not refusal and len(self._waiting) >= self.max_waiting:
+                refusal = (f'refused: the queue is full ({len(self._waiting)} commands are already waiting; '
+                           f'max_queued_commands={self.max_waiting})')
+            if refusal:
+                job.refusal = refusal
                 return job, False
             self._waiting.append(job)
             self._condition.notify()

@@ -16,12 +16,26 @@ parent finds its children by name when it runs (that is the re-binding). A name 
 the chain is not asked for again (the cycle guard: mutual recursion then works once both exist); a chain longer
 than `max_function_depth` or more than `max_generated_functions` per command is an error.
 
+Limits of one command besides the sandbox's (sandbox.py):
+- **model deadline**: the model requests of one command (the top-level program, nested LMP calls and function
+  generation) take at most `model_time_limit_s` together; each request is sent with the budget that is left
+  (`CompletionRequest.time_budget_s`), and once it is spent the command stops with reason 'model_timeout' (inside a
+  running program through the watchdog, so the program cannot catch it). Model time does not count against the
+  execution time limit.
+- **program size**: a model answer, and a program together with the functions generated for it, may hold at most
+  wire.MAX_PROGRAM_CHARS characters; a longer one is refused before anything runs, so what runs is always what the
+  result and /cap/code show in full.
+- **memory**: a command stopped for memory (the watchdog's limit, or a MemoryError) drops the variables it bound;
+  if the session still holds more than half the limit afterwards, the session is reset, and the result says so.
+
 Threads: `run` executes on the calling thread and holds a lock (one command at a time); `cancel()` may be called
 from any thread and stops the running program at its next checkpoint with ExecutionStopped(reason='cancelled').
 """
 from __future__ import annotations
 
 import ast
+import ctypes
+import gc
 import itertools
 import logging
 import threading
@@ -34,6 +48,7 @@ from cap_llm.errors import CapLLMError, CodeRejected, ExecutionStopped, Generati
 from cap_llm.functions import top_level_functions, undefined_calls
 from cap_llm.llm import Completion, CompletionRequest, LLMClient
 from cap_llm.sandbox import SANDBOX_FILE_PREFIX, CompiledProgram, Sandbox, SandboxLimits, bounded_exception_text
+from cap_llm.wire import MAX_PROGRAM_CHARS
 
 _log = logging.getLogger(__name__)
 
@@ -84,7 +99,7 @@ class CommandResult:
     error_type: str = ''
     error_line: int | None = None
     error_source: str | None = None
-    stop_reason: str = ''  # for ExecutionStopped: 'timeout', 'cancelled', 'memory' or 'recursion'
+    stop_reason: str = ''  # for ExecutionStopped: 'timeout', 'cancelled', 'memory', 'recursion', 'model_timeout'
     model_calls: int = 0
     prompt_tokens: int = 0
     completion_tokens: int = 0
@@ -114,6 +129,22 @@ class PreparedCode:
         return '\n\n'.join(part for part in parts if part)
 
 
+def check_program_size(text: str, what: str = "the model's answer") -> None:
+    """Refuse a program longer than wire.MAX_PROGRAM_CHARS before it is parsed or run."""
+    if len(text) > MAX_PROGRAM_CHARS:
+        raise CodeRejected(f'{what} has {len(text):,} characters; programs are limited to {MAX_PROGRAM_CHARS:,} '
+                           'characters, so it was not run')
+
+
+def _return_freed_memory() -> None:
+    """Collect garbage and hand freed heap back to the system (glibc), so resident memory reflects what is kept."""
+    gc.collect()
+    try:
+        ctypes.CDLL(None).malloc_trim(0)  # the process' own symbols: no file to open, no helper to run
+    except (OSError, AttributeError):
+        pass  # not glibc: resident memory shrinks later, or not at all
+
+
 def literal_assignment(line: str) -> tuple[str, Any] | None:
     """(name, value) if `line` is `name = <Python literal>`, else None."""
     try:
@@ -139,7 +170,8 @@ class Engine:
 
     def __init__(self, lmps: Iterable[LMPConfig], client: LLMClient, api: Mapping[str, Any] | None = None, *,
                  limits: SandboxLimits | None = None, default_lmp: str | None = None, fgen_lmp: str | None = 'fgen',
-                 max_function_depth: int = 4, max_generated_functions: int = 16) -> None:
+                 max_function_depth: int = 4, max_generated_functions: int = 16,
+                 model_time_limit_s: float = 120.0) -> None:
         self.lmps: dict[str, LMPConfig] = {config.name: config for config in lmps}
         if not self.lmps:
             raise ValueError('an Engine needs at least one LMP')
@@ -150,6 +182,7 @@ class Engine:
         self.fgen_lmp = fgen_lmp if fgen_lmp in self.lmps else None
         self.max_function_depth = max_function_depth
         self.max_generated_functions = max_generated_functions
+        self.model_time_limit_s = model_time_limit_s
         self._listeners: list[Callable[[EngineEvent], None]] = []
         self._cancel = threading.Event()
         self._run_lock = threading.Lock()
@@ -213,25 +246,48 @@ class Engine:
         return '\n'.join(parts) + '\n'
 
     def _ask(self, config: LMPConfig, query: str, context: str) -> str:
+        self._check_cancel()
+        remaining = self.model_time_limit_s - self._stats.model_s
+        if remaining <= 0:
+            self._model_deadline_passed()
         request = CompletionRequest(lmp=config.name, prompt=self.build_prompt(config, query, context), query=query,
                                     context=context, stop=config.stop, max_tokens=config.max_tokens,
-                                    temperature=config.temperature)
-        self._check_cancel()
+                                    temperature=config.temperature, time_budget_s=remaining)
         started = time.monotonic()
-        watchdog = self.sandbox.watchdog
+        completion: Completion | None = None
         try:
-            if watchdog is not None:  # a nested LMP: the model's time does not count against the program
-                with watchdog.paused():
-                    completion: Completion = self.client.complete(request)
-            else:
-                completion = self.client.complete(request)
-        finally:
-            self._stats.model_s += time.monotonic() - started
-            self._stats.model_calls += 1
+            completion = self.client.complete(request)
+        except Exception:
+            self._count_model_time(time.monotonic() - started)
+            self._check_cancel()
+            if self._stats.model_s >= self.model_time_limit_s:
+                self._model_deadline_passed()
+            raise
+        elapsed = time.monotonic() - started
+        # A client that measured the model itself (the sandbox process' node, which answers for it) knows better:
+        # the round trip around it is the program's time, as it is for the node's clock.
+        self._count_model_time(min(elapsed, completion.latency_s) if completion.latency_s > 0 else elapsed)
         self._stats.prompt_tokens += completion.prompt_tokens
         self._stats.completion_tokens += completion.completion_tokens
         self._check_cancel()
+        check_program_size(completion.text)
         return completion.text
+
+    def _count_model_time(self, seconds: float) -> None:
+        self._stats.model_s += seconds
+        self._stats.model_calls += 1
+        watchdog = self.sandbox.watchdog
+        if watchdog is not None:  # a nested LMP: the model's time does not count against the program
+            watchdog.exclude(seconds)
+
+    def _model_deadline_passed(self) -> None:
+        message = (f'the model deadline of {self.model_time_limit_s:g} s for one command passed '
+                   f'({self._stats.model_calls} model requests took {self._stats.model_s:.1f} s), so the command '
+                   'was stopped')
+        watchdog = self.sandbox.watchdog
+        if watchdog is not None:  # inside a running program: a stop it cannot catch
+            watchdog.stop(message, 'model_timeout')
+        raise ExecutionStopped(message, 'model_timeout')
 
     def _check_cancel(self) -> None:
         if self._cancel.is_set():
@@ -245,7 +301,9 @@ class Engine:
         tree = self.sandbox.check(code)
         functions: list[tuple[str, CompiledProgram]] = []
         self._define_missing(tree, self._known_names(), (), functions)
-        return PreparedCode(self.sandbox.compile_checked(tree, code, config.name), tuple(functions))
+        prepared = PreparedCode(self.sandbox.compile_checked(tree, code, config.name), tuple(functions))
+        check_program_size(prepared.full_code(), 'the program with the functions generated for it')
+        return prepared
 
     def _define_missing(self, tree: Any, known: set[str], chain: tuple[str, ...],
                         out: list[tuple[str, CompiledProgram]]) -> None:
@@ -346,6 +404,7 @@ class Engine:
             started = time.monotonic()
             prepared: PreparedCode | None = None
             execute_started = started
+            kept_scope, kept_functions = dict(self.scope), dict(self.functions)  # names only, for a memory stop
             try:
                 if context is None:
                     context = self.context_for(config)
@@ -359,7 +418,11 @@ class Engine:
                     self._execute(config, prepared, command, context)
                 result.success = True
             except Exception as error:  # everything a generated program can cause ends here, reported
-                self._describe_failure(result, error)
+                self._report_failure(result, error)
+                del error  # its traceback holds the program's frames and their memory
+            if result.stop_reason == 'memory' or result.error_type == 'MemoryError':
+                result.message += self._recover_memory(kept_scope, kept_functions)
+            del kept_scope, kept_functions
             finished = time.monotonic()
             stats = self._stats
             result.model_calls = stats.model_calls
@@ -375,6 +438,29 @@ class Engine:
             else:
                 self._emit(ERROR, name, code=result.code, message=result.message)
             return result
+
+    def _report_failure(self, result: CommandResult, error: Exception) -> None:
+        """Describe the failure; a message that cannot be built (a program's exception can carry anything) is
+        replaced by its type, and the session goes on."""
+        try:
+            self._describe_failure(result, error)
+        except Exception:  # a MemoryError, an int too long for str(), ...: the report itself must not fail
+            result.error_type = result.error_type or type(error).__name__
+            result.message = f'{type(error).__name__} (its message could not be shown)'
+
+    def _recover_memory(self, kept_scope: dict[str, Any], kept_functions: dict[str, str]) -> str:
+        """After a memory stop: drop what the command bound, reset the session if it still holds too much."""
+        self.scope.clear()
+        self.scope.update(kept_scope)
+        self.functions = kept_functions
+        _return_freed_memory()
+        if self.sandbox.memory_growth() <= self.sandbox.limits.max_memory_growth_bytes // 2:
+            return '; the variables this command set were dropped, the rest of the session is kept'
+        self._reset_scope()
+        _return_freed_memory()
+        self.sandbox.reset_memory_baseline()
+        return ('; the session still held too much memory, so it was reset (earlier variables and generated '
+                'functions are forgotten)')
 
     def _describe_failure(self, result: CommandResult, error: Exception) -> None:
         line, source_line, origin = self._locate(error)

@@ -1,15 +1,17 @@
 """The sandbox process: one session's Engine, scope and generated code, apart from lmp_node.
 
 Started by IsolatedEngine (isolated_engine.py) as `python -m cap_llm.engine_process <data fd> <control fd>` with
-one end of two socket pairs. On the data socket, the first message is the setup (robot API names, LLM client
-options, sandbox limits, address-space limit); then the parent sends run / reset / close and the replies to the robot
-API calls this process makes, and this process sends engine events, API calls, the result of each run, and a
-heartbeat every HEARTBEAT_S while it can run Python: a C call that holds the interpreter (a pathological hash, a
-quadratic repr) silences it, and the parent kills us. The main thread reads the data socket itself, also for the
-reply to an API call (a hand-off between threads would cost about a millisecond per call). The control socket
-carries only cancel; a thread of its own watches it, and its closing means the parent is gone.
+one end of two socket pairs. On the data socket, the first message is the setup (robot API names, sandbox limits,
+the model deadline, address-space limit); then the parent sends run / reset / close and the replies to the robot
+API calls and model requests this process makes, and this process sends engine events, API calls ('call'), model
+requests ('complete', the CompletionRequest's fields), the result of each run, and a heartbeat every HEARTBEAT_S
+while it can run Python. The main thread reads the data socket itself, also for the reply to a request (a hand-off
+between threads would cost about a millisecond per call). The control socket carries only cancel; a thread of its
+own watches it, and its closing means the parent is gone.
 
-No rclpy here: the robot lives in the parent, behind the `call` messages.
+No rclpy and no model client here: the robot and the model live in the parent, behind the `call` and `complete`
+messages, so this process needs no network, and the parent measures the model's time exactly (its reply carries
+that time, which the watchdog excludes from the program's time, as the parent's clock does).
 """
 from __future__ import annotations
 
@@ -24,8 +26,10 @@ from multiprocessing.connection import Connection
 from typing import Any, Callable
 
 from cap_llm import wire
-from cap_llm.errors import RobotApiError
-from cap_llm.wire import API_ERRORS, MAX_CODE_CHARS, MEMORY_EXIT_CODE
+from cap_llm.jail import enter_jail
+from cap_llm.errors import CodeRejected, LLMError, RobotApiError
+from cap_llm.llm import Completion, CompletionRequest
+from cap_llm.wire import API_ERRORS, MAX_CODE_CHARS, MAX_PROMPT_CHARS, MEMORY_EXIT_CODE
 
 HEARTBEAT_S = 0.25
 
@@ -48,13 +52,10 @@ class _Channel:
     def receive(self) -> dict[str, Any]:
         return wire.decode(self._connection.recv_bytes(wire.MAX_MESSAGE_BYTES))
 
-    def call(self, name: str, args: tuple, kwargs: dict) -> Any:
-        started = time.perf_counter()
-        call_id = next(self._ids)
-        try:
-            self.send({'op': 'call', 'id': call_id, 'name': name, 'args': list(args), 'kwargs': kwargs})
-        except wire.WireError as error:
-            raise TypeError(f'{name}: {error}') from None
+    def request(self, message: dict[str, Any]) -> dict[str, Any]:
+        """Send a request to the parent and wait for its reply (which must answer this request)."""
+        request_id = message['id'] = next(self._ids)
+        self.send(message)
         self.waiting_for_parent.set()
         try:
             reply = self.receive()
@@ -62,13 +63,47 @@ class _Channel:
             os._exit(0)  # the parent is gone (or spoke nonsense): nothing here is worth keeping
         finally:
             self.waiting_for_parent.clear()
+        if reply.get('op') != 'reply' or reply.get('id') != request_id:
+            raise RobotApiError('the node answered out of turn')
+        return reply
+
+    def call(self, name: str, args: tuple, kwargs: dict) -> Any:
+        started = time.perf_counter()
+        try:
+            reply = self.request({'op': 'call', 'name': name, 'args': list(args), 'kwargs': kwargs})
+        except wire.WireError as error:
+            raise TypeError(f'{name}: {error}') from None
         self.call_seconds.append(time.perf_counter() - started)
-        if reply.get('op') != 'reply' or reply.get('id') != call_id:
-            raise RobotApiError(f'{name}: the robot answered out of turn')
         error = reply.get('error')
         if error:
             raise API_ERRORS.get(str(error.get('type')), RobotApiError)(str(error.get('message', '')))
         return reply.get('value')
+
+
+class _ParentModel:
+    """The LLMClient of this process: every request goes to the parent, which asks the model."""
+
+    def __init__(self, channel: _Channel) -> None:
+        self._channel = channel
+
+    def complete(self, request: CompletionRequest) -> Completion:
+        if len(request.prompt) > MAX_PROMPT_CHARS:
+            raise LLMError(f'the prompt has {len(request.prompt):,} characters, more than the limit of '
+                           f'{MAX_PROMPT_CHARS:,} (the session history grows with every command): reset the session')
+        fields = dataclasses.asdict(request)
+        fields['stop'] = list(request.stop)
+        try:
+            reply = self._channel.request({'op': 'complete', 'request': fields})
+        except wire.WireError as error:
+            raise LLMError(f'the model request cannot be sent: {error}') from None
+        error = reply.get('error')
+        if error:
+            kind = CodeRejected if error.get('type') == 'CodeRejected' else LLMError
+            raise kind(str(error.get('message', '')))
+        value = reply.get('completion')
+        return Completion(text=str(value['text']), model=str(value['model']),
+                          prompt_tokens=int(value['prompt_tokens']), completion_tokens=int(value['completion_tokens']),
+                          latency_s=float(value['latency_s']), source=str(value['source']))
 
 
 def _proxy(channel: _Channel, name: str) -> Callable[..., Any]:
@@ -89,16 +124,15 @@ def _limit_address_space(extra_bytes: int) -> None:
 
 
 def _build_engine(setup: dict[str, Any], channel: _Channel):
-    from cap_llm.cassette import make_client
     from cap_llm.sandbox import SandboxLimits
     from cap_llm.tabletop import build_tabletop_engine
 
     if setup.get('domain', 'tabletop') != 'tabletop':
         raise ValueError(f"unknown domain {setup.get('domain')!r}")
-    client = make_client(**setup.get('client', {}))
     limits = SandboxLimits(**setup.get('limits', {}))
     api = {name: _proxy(channel, name) for name in setup['api']}
-    return build_tabletop_engine(api, client, limits)
+    return build_tabletop_engine(api, _ParentModel(channel), limits,
+                                 model_time_limit_s=float(setup.get('model_time_limit_s', 120.0)))
 
 
 def serve(connection: Connection, control: Connection) -> None:
@@ -106,6 +140,11 @@ def serve(connection: Connection, control: Connection) -> None:
     setup = channel.receive()
     engine = _build_engine(setup, channel)
     _limit_address_space(int(setup.get('address_space_extra_bytes', 0)))
+    # The jail comes last of the setup (the engine's modules are loaded, the memory cap is set) and before the
+    # threads start: Landlock and the capability drop bind the calling thread and the threads it starts later.
+    jail = setup.get('jail', 'required')
+    if jail != 'off':
+        enter_jail(required=(jail != 'best_effort'))
     stopped = threading.Event()
     busy = threading.Event()  # a request is being handled: the parent is listening for heartbeats
     # A cancel names its run: a late one must not stop the next command, an early one (read before its run

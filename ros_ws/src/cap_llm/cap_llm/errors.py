@@ -20,9 +20,10 @@ class CodeRejected(SandboxError):
 
 
 class ExecutionStopped(SandboxError):
-    """The running program was stopped: time limit, cancellation, memory or recursion limit.
+    """The running program was stopped: time limit, cancellation, memory or recursion limit, model deadline.
 
-    `reason` is one of 'timeout', 'cancelled', 'memory', 'recursion'.
+    `reason` is one of 'timeout', 'cancelled', 'memory', 'recursion', 'model_timeout' (the command's model
+    requests took their overall deadline, Engine's `model_time_limit_s`).
     """
 
     def __init__(self, message: str, reason: str) -> None:
@@ -68,7 +69,8 @@ class SandboxProcessLost(SandboxError):
 
     `reason`: 'crashed' (the interpreter died, e.g. a C stack overflow), 'stalled' (one operation held the
     interpreter past the stall limit), 'memory' (the address-space limit was hit), 'cancelled' (a stop was not
-    honoured within the grace period), 'timeout' (past the command's deadline), 'protocol' (a malformed message) or
+    honoured within the grace period), 'timeout' (the program ran past its time limit plus the kill margin and did
+    not stop), 'protocol' (a malformed message) or
     'closed' (the node is shutting down).
     """
 

@@ -9,12 +9,18 @@ Configuration comes from arguments or the environment:
     CAP_LLM_API_KEY    bearer token; OPENAI_API_KEY is used when unset
     CAP_LLM_API        'chat' (default) or 'completions'
     CAP_LLM_TIMEOUT_S  seconds per HTTP attempt (default 60)
+
+Transient failures are retried with exponential backoff: HTTP 408/409/429/5xx, timeouts, refused connections and
+connections closed mid-answer. A request's `time_budget_s` bounds all of it, retries and backoff included: each
+attempt gets at most what is left of the budget, and when the budget is spent the request fails with an LLMError
+naming it (the answer of an attempt still under way is then abandoned).
 """
 from __future__ import annotations
 
 import os
 import random
 import re
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Protocol
@@ -35,6 +41,7 @@ class CompletionRequest:
     stop: tuple[str, ...] = ()
     max_tokens: int = 512
     temperature: float = 0.0
+    time_budget_s: float | None = None  # the most this request may take, retries included; None: no bound
 
 
 @dataclass(frozen=True)
@@ -100,6 +107,13 @@ def clean_chat_answer(text: str, stop: tuple[str, ...]) -> str:
 DEFAULT_SYSTEM_PROMPT = ('You continue Python programs. Reply with the Python code that follows the last comment of '
                          'the user message, and nothing else: no explanations, no comments.')
 _RETRY_STATUS = frozenset({408, 409, 429, 500, 502, 503, 504})
+_CLOSED_MID_ANSWER = (requests.exceptions.ChunkedEncodingError, requests.exceptions.ContentDecodingError)
+NO_MODEL_CONFIGURED = ('no model configured for the http backend: set CAP_LLM_MODEL (parameter model) and '
+                       'CAP_LLM_BASE_URL (parameter base_url) to your OpenAI-compatible endpoint')
+
+
+class _BudgetSpent(Exception):
+    """Internal: the request's time budget ran out while an attempt was under way."""
 _MAX_STOP_SEQUENCES = 4  # the OpenAI API accepts at most four
 
 
@@ -136,7 +150,7 @@ class OpenAICompatibleClient:
         }
         settings.update(overrides)
         if not settings['model']:
-            raise LLMError('no model configured: set CAP_LLM_MODEL (and CAP_LLM_BASE_URL for a local server)')
+            raise LLMError(NO_MODEL_CONFIGURED)
         return cls(**settings)
 
     # -- protocol ------------------------------------------------------------------------------------------
@@ -174,19 +188,66 @@ class OpenAICompatibleClient:
                     pass
         return min(delay, self.backoff_max_s)
 
+    def _post(self, url: str, payload: dict[str, Any], headers: dict[str, str], timeout_s: float,
+              deadline: float | None) -> requests.Response:
+        """One attempt. Without a deadline, in this thread; with one, waited for no longer than the deadline.
+
+        `timeout_s` bounds each socket operation, not the whole answer (a server may trickle it), so a request with a
+        budget runs its attempt on a helper thread and abandons it when the budget is spent.
+        """
+        if deadline is None:
+            return self._session.post(url, json=payload, headers=headers, timeout=timeout_s)
+        outcome: dict[str, Any] = {}
+
+        def attempt() -> None:
+            try:
+                outcome['response'] = self._session.post(url, json=payload, headers=headers, timeout=timeout_s)
+            except BaseException as error:  # handed to the waiting thread, which raises it there
+                outcome['error'] = error
+
+        worker = threading.Thread(target=attempt, name='llm-request', daemon=True)
+        worker.start()
+        worker.join(max(0.0, deadline - time.monotonic()))
+        if worker.is_alive():
+            raise _BudgetSpent()
+        if 'error' in outcome:
+            raise outcome['error']
+        return outcome['response']
+
     def complete(self, request: CompletionRequest) -> Completion:
         url, payload = self._payload(request)
         headers = {'Content-Type': 'application/json'}
         if self.api_key:
             headers['Authorization'] = f'Bearer {self.api_key}'
         started = time.monotonic()
+        budget = request.time_budget_s
+        deadline = None if budget is None else started + max(0.0, budget)
         last_problem = ''
+        attempts = 0
+
+        def budget_spent() -> LLMError:
+            detail = f'; last: {last_problem}' if last_problem else ''
+            return LLMError(f'the model server at {url} gave no answer within the time budget of {budget:g} s '
+                            f'({attempts} attempt{"s" if attempts != 1 else ""}{detail})')
+
         for attempt in range(self.max_retries + 1):
+            timeout_s = self.timeout_s
+            if deadline is not None:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise budget_spent()
+                timeout_s = min(timeout_s, left)
+            attempts += 1
             response = None
             try:
-                response = self._session.post(url, json=payload, headers=headers, timeout=self.timeout_s)
+                response = self._post(url, payload, headers, timeout_s, deadline)
+            except _BudgetSpent:
+                last_problem = 'an answer still under way'
+                raise budget_spent() from None
             except requests.Timeout:
-                last_problem = f'no answer within {self.timeout_s:g} s'
+                last_problem = f'no answer within {timeout_s:g} s'
+            except _CLOSED_MID_ANSWER as error:
+                last_problem = f'the connection closed mid-answer ({error.__class__.__name__})'
             except requests.ConnectionError as error:
                 last_problem = f'connection failed ({error.__class__.__name__})'
             if response is not None:
@@ -204,7 +265,10 @@ class OpenAICompatibleClient:
                 if response.status_code not in _RETRY_STATUS:
                     raise LLMError(f'the model server at {url} refused the request: {last_problem}')
             if attempt < self.max_retries:
-                self._sleep(self._delay(attempt, response))
+                delay = self._delay(attempt, response)
+                if deadline is not None and time.monotonic() + delay >= deadline:
+                    raise budget_spent()  # the next attempt could not start within the budget
+                self._sleep(delay)
         raise LLMError(f'the model server at {url} gave no answer after {self.max_retries + 1} attempts; '
                        f'last: {last_problem}')
 

@@ -2,7 +2,8 @@
 
 Called from the worker thread that runs a program while an executor spins the node in another thread; requests are
 sent asynchronously and awaited on threading events, never by spinning (see CONVENTIONS.md, rclpy threading).
-Every failure raises RobotApiError with a message a person understands.
+Every failure raises RobotApiError with a message a person understands. Text a program passes on (what it says,
+object names) is made safe first (safe_text.wire_text): a string rclpy cannot encode would fail the publish.
 """
 from __future__ import annotations
 
@@ -22,9 +23,11 @@ from cap_interfaces.action import PickPlace
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 from cap_llm.errors import RobotApiError, StoppedError  # noqa: F401  (callers import them from here too)
+from cap_llm.safe_text import wire_text
 
 
 MAX_SAY_CHARS = 2000
+MAX_NAME_CHARS = 200  # of an object name sent to perception or the controller
 _BOUNDED_REPR = reprlib.Repr()  # Python 3.11: limits are attributes, not constructor arguments
 _BOUNDED_REPR.maxlevel, _BOUNDED_REPR.maxlist, _BOUNDED_REPR.maxtuple, _BOUNDED_REPR.maxdict = 3, 10, 10, 10
 _BOUNDED_REPR.maxstring, _BOUNDED_REPR.maxother = 500, 200
@@ -94,7 +97,8 @@ class RosTabletopApi:
     def _object(self, name: str):
         if not isinstance(name, str):
             raise RobotApiError(f'an object name must be text like "red block", not {type(name).__name__}')
-        response = self._call(self._state, GetObjectState.Request(name=name), 'the perception service')
+        response = self._call(self._state, GetObjectState.Request(name=wire_text(name, MAX_NAME_CHARS)),
+                              'the perception service')
         if not response.success:
             raise RobotApiError(response.message or f'unknown object {name!r}')
         return response.state
@@ -123,8 +127,10 @@ class RosTabletopApi:
     # -------------------------------------------------------------------------------------------- motion
     def put_first_on_second(self, obj_name: str, target: Any) -> None:
         """Pick up `obj_name` and place it on `target`: an object name, or a table position [x, y] in metres."""
-        goal = PickPlace.Goal(object_name=str(obj_name))
+        obj_name = wire_text(obj_name if isinstance(obj_name, str) else str(obj_name), MAX_NAME_CHARS)
+        goal = PickPlace.Goal(object_name=obj_name)
         if isinstance(target, str):
+            target = wire_text(target, MAX_NAME_CHARS)
             goal.target_name = target
             where = f'the {target}'
         else:
@@ -165,11 +171,12 @@ class RosTabletopApi:
         """Say something to the user (published on /cap/say)."""
         # A program may pass anything: bound the conversion so a huge structure cannot stall the node.
         if isinstance(text, str):
-            message = text[:MAX_SAY_CHARS]
-        elif isinstance(text, (bool, int, float, np.generic)) or (isinstance(text, np.ndarray) and text.size <= 100):
-            message = str(text)[:MAX_SAY_CHARS]
-        else:
-            message = _BOUNDED_REPR.repr(text)[:MAX_SAY_CHARS]
+            message = text
+        elif isinstance(text, (bool, float, np.generic)) or (isinstance(text, np.ndarray) and text.size <= 100):
+            message = str(text)
+        else:  # also int: str() of a 10**5-digit integer is slow (and refused by Python past 4300 digits)
+            message = _BOUNDED_REPR.repr(text)
+        message = wire_text(message, MAX_SAY_CHARS)
         self.said.append(message)
         self._say_publisher.publish(String(data=message))
 

@@ -11,7 +11,9 @@ What a program goes through
    getattr, past every guard); f-string format specs that are nested or wider than the limit. `nonlocal` is
    allowed: it reaches only the enclosing function's own variables.
 2. **Rewrite**: every binary and augmented operator, every single comparison and every attribute read becomes a call
-   to a checked helper (`sandbox_guards.py`), and every loop body starts with a call to a checkpoint. The
+   to a checked helper (`sandbox_guards.py`), every loop body starts with a call to a checkpoint, and every
+   comprehension step, function body and lambda checks that the tracer is still installed (one C call; if it is
+   gone, the checkpoint raises the stop). The
    helpers estimate the size of a result first (integer bits of `**`, `*`, `<<`; length of sequence repetition and
    concatenation, also with NumPy integer counts; elements of broadcast NumPy operations and matrix products) and
    raise ResourceLimitError instead of doing work that exceeds SandboxLimits; string methods that pad, replace,
@@ -20,7 +22,13 @@ What a program goes through
    of an iterable without a length run as a checked Python loop (an iterator over the list itself never ends in
    C). NumPy methods (`ndarray` and scalars): `resize` takes no `refcheck`, `astype`/`view` and every `dtype=`
    refuse object, string, void and subarray dtypes; arithmetic on object arrays is refused; `np.diff`'s `n` is
-   bounded by the array size.
+   bounded by the array size. Every argument of an allow-listed NumPy function is checked: a dtype of objects or
+   strings is refused wherever it is passed (also positionally), object arrays are refused as arguments and as
+   results (an array of integers too large for int64 would make a sum or product unbounded), lists count with the
+   size they convert to, and all array-like arguments together must broadcast within the element limit.
+   `np.repeat` counts the copies it makes (repeating a zero-width row 10 ** 12 times is 10 ** 12 steps), and
+   `np.percentile` / `np.median` the results per quantile. `sorted`, `list.sort`, `min` and `max` bound the
+   element comparisons of list and tuple items (aliased long lists compare element by element).
 3. **Names**: the program sees restricted builtins (no `type`/`object`, one-argument `iter`, bounded `range`, `sum`
    as a checked Python loop, `map`/`filter`/`zip`/`enumerate`/`reversed` as Python generators whose frames the
    watchdog sees, so an endless or deeply nested chain meets the time or depth limit, and an `__import__` for
@@ -38,16 +46,19 @@ What a program goes through
    `finally` are refused). A stop is sticky: CPython swallows an exception raised while a generator is finalized
    and removes the trace function with it, so the watchdog never raises on the 'call' event of a generator frame
    (it checks at the frame's first line instead), every later check raises the stop again, loop checkpoints and
-   wrapped calls verify the deadline, the cancel event and that the tracer is still installed, and a run that
-   ends after a swallowed stop still raises ExecutionStopped. Memory growth is measured from the start of the run,
-   or, once `reset_memory_baseline()` was called (the engine does at every session start), from then on: what a
-   session keeps between commands counts against the limit. The engine's own work for a nested LMP call
-   (prompting, checking) runs untraced.
+   wrapped calls, comprehensions, function bodies and lambdas verify that the tracer is still installed (and
+   raise the stop when it is not), and a run that ends after a swallowed stop still raises ExecutionStopped.
+   Memory growth is measured from the start of the run, or, once `reset_memory_baseline()` was called (the engine
+   does at every session start), from then on: what a session keeps between commands counts against the limit
+   (after a memory stop the engine drops what the command bound and, if the session still holds more than half the
+   limit, resets it). The engine's own work for a nested LMP call (prompting, checking) runs untraced; the model's
+   time is excluded with `Watchdog.exclude`, and the engine stops a command whose model deadline passed through
+   `Watchdog.stop` (reason 'model_timeout').
 
 What it guarantees
 - Generated code cannot import, reach dunder attributes, frames, globals or real builtins, or write attributes.
-- A Python-level loop, recursion or generator chain is stopped within one trace event of the limit, also after a
-  stop was swallowed by a generator finalizer; a call into the robot API is a checkpoint too.
+- A Python-level loop, comprehension, recursion or generator chain is stopped within one trace event of the limit,
+  also after a stop was swallowed by a generator finalizer; a call into the robot API is a checkpoint too.
 - Single operations the helpers know (big powers, repetition, padding, NumPy creation and broadcasting, Shapely
   buffers) are refused before they allocate.
 - The host survives: refusals and stops raise SandboxError subclasses; the program's own exceptions (an unknown
@@ -56,7 +67,8 @@ What it guarantees
   (`bounded_text`, `bounded_exception_text`: reprlib, at most 10,000 characters).
 
 What it does not guarantee (in process; IsolatedEngine, which lmp_node uses, runs the sandbox in a process of
-its own and bounds the first two: a dead process costs the session, a silent one is killed after `stall_limit_s`)
+its own and bounds the first three from outside: a dead process costs the session, and a program that has not
+ended by `time_limit_s` + 0.5 s, whatever it does, is killed, see isolated_engine.py)
 - It is not an OS boundary: a bug in CPython, NumPy or Shapely reachable with allowed values is not contained.
   Known instances: C recursion over a deeply nested value built by a loop (`t = (t,)` 300,000 times, then
   `hash(t)`, `str(t)` or `t == t`) overflows the C stack and kills the process.
@@ -65,8 +77,9 @@ its own and bounds the first two: a dead process costs the session, a silent one
   hash. Every input stays within the size limits, the single C call runs for minutes or hours and is not
   interrupted.
 - C-level work inside a single allowed call is not interrupted (e.g. sorting a million long strings, a NumPy
-  reduction over a large array); the size limits keep such calls to seconds, but a robot API call that blocks is
-  only checked when it returns.
+  reduction over a large array, a GEOS operation on a pathological geometry: a buffer of a 30,000-point random
+  line runs for minutes and releases the interpreter); the size limits keep most such calls to seconds, but a
+  robot API call that blocks is only checked when it returns.
 - Memory is bounded by the size rules for the operations above, and otherwise by sampling resident memory every
   5 ms: a NumPy function without a size rule could allocate up to its inputs' product before the sampler sees it.
   Size rules are estimates: NumPy arrays built from nested lists are estimated from their first element, and
@@ -341,6 +354,36 @@ class _Rewriter(ast.NodeTransformer):
     visit_While = _tick_loop
     visit_For = _tick_loop
 
+    # Comprehensions, function bodies and lambdas check too once the tracer is gone (a stop swallowed by a
+    # generator finalizer): `gettrace() is None and tick()`, one C call while the tracer runs, which checks anyway.
+    @staticmethod
+    def _untraced_check(node: ast.AST) -> ast.expr:
+        traced = ast.Compare(left=ast.Call(func=_helper('gettrace', node), args=[], keywords=[]), ops=[ast.Is()],
+                             comparators=[ast.Constant(None)])
+        check = ast.BoolOp(op=ast.And(), values=[traced, ast.Call(func=_helper('tick', node), args=[], keywords=[])])
+        return _located(check, node)
+
+    def _tick_comprehension(self, node: ast.AST) -> ast.AST:
+        self.generic_visit(node)
+        for generator in node.generators:
+            generator.ifs.insert(0, _located(ast.UnaryOp(op=ast.Not(), operand=self._untraced_check(node)), node))
+        return node
+
+    visit_ListComp = _tick_comprehension
+    visit_SetComp = _tick_comprehension
+    visit_DictComp = _tick_comprehension
+    visit_GeneratorExp = _tick_comprehension
+
+    def visit_FunctionDef(self, node: ast.FunctionDef) -> ast.AST:
+        self.generic_visit(node)
+        node.body.insert(0, _located(ast.Expr(value=self._untraced_check(node)), node))
+        return node
+
+    def visit_Lambda(self, node: ast.Lambda) -> ast.AST:
+        self.generic_visit(node)
+        node.body = _located(ast.BoolOp(op=ast.Or(), values=[self._untraced_check(node), node.body]), node)
+        return node
+
 
 def rewrite(tree: ast.Module) -> ast.Module:
     """Return the checked tree with guarded operators (line numbers preserved for error reports)."""
@@ -394,20 +437,27 @@ def bounded_text(value: Any, limit: int = MAX_TEXT) -> str:
         text = value
     elif isinstance(value, (float, bool, type(None))) or (isinstance(value, int) and value.bit_length() < 4000):
         text = str(value)
+    elif isinstance(value, int):  # str() would be quadratic, and Python refuses it past 4,300 digits
+        text = f'<an integer of {value.bit_length():,} bits>'
     else:
-        text = _BOUNDED_REPR.repr(value)
+        try:
+            text = _BOUNDED_REPR.repr(value)
+        except Exception:  # reprlib falls back on repr(), which may refuse (an int nested in a container)
+            text = f'<{type(value).__name__}>'
+
     return text if len(text) <= limit else text[:limit] + '...'
 
 
 def bounded_exception_text(error: BaseException, limit: int = MAX_TEXT) -> str:
     """The message of a program's exception, built with bounded work whatever its arguments are."""
-    if all(isinstance(arg, _PLAIN) and not (isinstance(arg, int) and arg.bit_length() >= 4000)
-           for arg in error.args):
-        text = str(error)  # plain arguments: the exception's own wording, cost bounded by their size
-    elif len(error.args) == 1:
-        text = bounded_text(error.args[0], limit)
-    else:
-        text = _BOUNDED_REPR.repr(error.args)
+    args = error.args
+    if len(args) <= 1 and all(isinstance(arg, _PLAIN) and not (isinstance(arg, int) and arg.bit_length() >= 4000)
+                              for arg in args):
+        text = str(error)  # one plain argument: the exception's own wording, cost bounded by its size
+    elif len(args) == 1:
+        text = bounded_text(args[0], limit)
+    else:  # str() of many arguments is the repr of their tuple: unbounded for aliased long texts
+        text = bounded_text(args[:10], limit)
     return text if len(text) <= limit else text[:limit] + '...'
 
 
@@ -499,7 +549,15 @@ class Watchdog:
         try:
             yield
         finally:
-            self.deadline += time.monotonic() - started
+            self.exclude(time.monotonic() - started)
+
+    def exclude(self, seconds: float) -> None:
+        """`seconds` (spent waiting for the model) do not count against the wall-clock limit."""
+        self.deadline += max(seconds, 0.0)
+
+    def stop(self, message: str, reason: str) -> None:
+        """End the run now with `reason` (e.g. the command's model deadline passed): raised, and sticky."""
+        self._stop(message, reason)
 
     @contextmanager
     def suspended(self) -> Iterator[None]:
@@ -608,6 +666,10 @@ class Sandbox:
         self.numpy = self._make_numpy()
         self.shapely_names = self._make_shapely()
 
+    def memory_growth(self) -> int:
+        """Resident memory above the session's baseline (0 when no baseline was set)."""
+        return 0 if self.memory_baseline is None else _resident_bytes() - self.memory_baseline
+
     def reset_memory_baseline(self) -> None:
         """Measure memory growth from now on (a new session): variables kept between runs count against the
         limit, so a session cannot grow by the full limit once per command."""
@@ -625,7 +687,9 @@ class Sandbox:
                       for name in ('map', 'filter', 'zip', 'enumerate', 'reversed')})
         names.update(range=self._guards['guarded_range'], iter=self._guards['guarded_iter'],
                      sum=self._guards['guarded_sum'], pow=self._guards['guarded_pow'],
-                     round=self._guards['guarded_round'], print=self.wrap_callable(_program_print))
+                     round=self._guards['guarded_round'], sorted=self._guards['guarded_sorted'],
+                     min=self._guards['guarded_min'], max=self._guards['guarded_max'],
+                     print=self.wrap_callable(_program_print))
         names['__import__'] = _internal_import
         return names
 
@@ -664,6 +728,7 @@ class Sandbox:
             if key.startswith(('op_', 'cmp_')) or key in ('augmented_item', 'tick'):
                 scope[_GUARD_PREFIX + key] = value
         scope[_GUARD_PREFIX + 'getattr'] = self._guards['guarded_getattr']
+        scope[_GUARD_PREFIX + 'gettrace'] = sys.gettrace
         scope['np'] = self.numpy
         scope.update(self.shapely_names)
         for name, value in (names or {}).items():

@@ -49,16 +49,34 @@ def _len_or_none(value):
         return None
 
 
+_MAX_NESTING = 32  # of nested lists a shape estimate follows (deeper values are numpy's own error)
+
+
+def _shape_estimate(value):
+    """The shape numpy would make of `value`: nested lists are estimated from their first element."""
+    dims = []
+    for _level in range(_MAX_NESTING):
+        if isinstance(value, _ARRAYS):
+            dims.extend(value.shape)
+            break
+        if not isinstance(value, (list, tuple, range)):
+            break
+        dims.append(len(value))
+        if not value:
+            break
+        value = value[0]
+    return tuple(dims)
+
+
 def _array_size_estimate(value):
-    """Element count numpy would make of `value` (nested lists are estimated from their first element)."""
+    """Element count numpy would make of `value` (nested lists are estimated from their first element; an empty
+    inner list counts as one element, the work of visiting it)."""
     if isinstance(value, _ARRAYS):
         return int(value.size)
-    if isinstance(value, (list, tuple, range)):
-        if not value:
-            return 0
-        inner = _array_size_estimate(value[0])
-        return len(value) * max(inner, 1)
-    return 1
+    shape = _shape_estimate(value)
+    if not shape or not shape[0]:
+        return 0 if shape else 1
+    return math.prod(max(d, 1) for d in shape)
 
 
 def check_dtype(value, what):
@@ -457,6 +475,54 @@ def checked_extend(target, iterable, what):
             check_length(len(target), what)
 
 
+_COMPARED = frozenset((list, tuple))
+_IS_COMPARED = tuple(functools.partial(type.__instancecheck__, kind) for kind in _COMPARED)
+
+
+def _check_comparisons(items, comparisons, what):
+    """Comparing two lists or tuples visits their elements, also when both are one object (`[row] * 20000`):
+    comparisons times the largest item is the C work a sort, min or max would do."""
+    if _COMPARED.isdisjoint(set(map(type, items))):
+        return  # numbers, texts: the usual case, decided in C
+    containers = list(itertools.chain.from_iterable(filter(test, items) for test in _IS_COMPARED))
+    distinct = dict(zip(map(id, containers), containers)).values()  # aliased items are estimated once, in C
+    largest = max(map(_array_size_estimate, distinct), default=1)
+    if comparisons * largest > 100 * LIMITS.max_sequence_length:
+        refuse(f'{what} would compare {comparisons:,} times items of up to {largest:,} elements; the sandbox allows '
+               f'at most {100 * LIMITS.max_sequence_length:,} element comparisons')
+
+
+def _sort_keys(items, key):
+    return items if key is None else list(map(key, items))
+
+
+def guarded_sorted(iterable, *, key=None, reverse=False):
+    items = list(iterable)
+    keys = _sort_keys(items, key)
+    _check_comparisons(keys, len(keys) * max(len(keys).bit_length(), 1), 'sorted()')
+    if key is None:
+        return sorted(items, reverse=reverse)
+    order = sorted(range(len(items)), key=keys.__getitem__, reverse=reverse)  # keys computed once, as sorted does
+    return [items[index] for index in order]
+
+
+def _extreme(builtin, what):
+    def extreme(*args, key=None, **options):
+        items = list(args[0]) if len(args) == 1 else list(args)
+        keys = _sort_keys(items, key)
+        _check_comparisons(keys, len(keys), what)
+        if key is None:
+            return builtin(items, **options)
+        if not items:
+            return builtin(items, **options)  # the default, or builtin's own error
+        return items[builtin(range(len(items)), key=keys.__getitem__)]
+    return extreme
+
+
+guarded_min = _extreme(min, 'min()')
+guarded_max = _extreme(max, 'max()')
+
+
 def guarded_sum(iterable, start=0):
     """sum() as a Python loop of checked additions: C-level sum of lists or arrays is neither bounded nor stoppable."""
     total = start
@@ -544,6 +610,10 @@ def _list_method(obj, name):
         def extend(iterable):
             checked_extend(obj, iterable, 'list.extend')
         return extend
+    if name == 'sort':
+        def sort(*, key=None, reverse=False):
+            obj[:] = guarded_sorted(obj, key=key, reverse=reverse)
+        return sort
     return method
 
 
@@ -551,8 +621,8 @@ def _array_method(obj, name):
     method = getattr(obj, name)
     if name == 'repeat':
         def repeat(repeats, *rest, **kwargs):
-            check_elements(numpy.size(obj) * int(numpy.max(repeats)) if numpy.size(repeats) else 0,
-                           'ndarray.repeat')
+            axis = rest[0] if rest else kwargs.get('axis')
+            check_elements(repeat_elements(obj, repeats, axis), 'ndarray.repeat')
             return method(repeats, *rest, **kwargs)
         return repeat
     if name == 'resize':
@@ -599,8 +669,10 @@ def _geometry_method(obj, name):
             if segments > _MAX_QUAD_SEGS:
                 refuse(f'{name} with {segments} segments per quarter circle; the sandbox allows {_MAX_QUAD_SEGS}')
             # an array of distances makes one geometry per distance
-            check_elements(int(numpy.size(distance)) * (4 * max(segments, 16) + 1) * max(len(obj.bounds), 1),
-                           name)
+            # every vertex of the geometry gets a quarter circle (GEOS works without the interpreter: a buffer of
+            # a 100,000-point line runs for a minute, out of the tracer's reach)
+            vertices = max(int(shapely.get_num_coordinates(obj)), 1)
+            check_elements(int(numpy.size(distance)) * (4 * max(segments, 16) + 1) * vertices, name)
             return method(distance, *args, **kwargs)
         return buffered
     if name == 'segmentize':
@@ -615,7 +687,7 @@ def _geometry_method(obj, name):
 
 _REFUSED_ON_TYPES = frozenset(('format', 'format_map', 'ljust', 'rjust', 'center', 'zfill', 'expandtabs',
                                'replace', 'join', 'translate', 'maketrans', 'extend', 'repeat', 'resize',
-                               'buffer', 'segmentize', 'to_bytes', 'from_bytes'))
+                               'buffer', 'segmentize', 'to_bytes', 'from_bytes', 'sort'))
 
 
 def guarded_getattr(obj, name):
@@ -663,10 +735,39 @@ def _size(value):
 
 
 def _broadcast_count(*values):
+    """Elements of the broadcast of `values` (shapes estimated without converting lists), 0 if they do not."""
     try:
-        return math.prod(numpy.broadcast_shapes(*(numpy.shape(v) for v in values if v is not None)))
+        return math.prod(numpy.broadcast_shapes(*(_shape_estimate(v) for v in values if v is not None)))
     except Exception:
         return 0  # numpy raises its own error
+
+
+_ARRAY_LIKE = (numpy.ndarray, numpy.generic, list, tuple)
+_DTYPE_LIKE = (str, type, numpy.dtype)
+
+
+def _check_arguments(values, what):
+    """Every argument of a NumPy function: no object arrays (their elements grow without bound: a sum of huge
+    integers), no dtype of objects or strings wherever it is passed, no list that converts to too many elements,
+    and no broadcast of them all to too many elements."""
+    arrays = []
+    for value in values:
+        if isinstance(value, _DTYPE_LIKE):
+            check_dtype(value, what)
+        elif isinstance(value, _ARRAY_LIKE):
+            if isinstance(value, numpy.ndarray) and value.dtype.kind == 'O':
+                forbid(f'{what} on an array of Python objects is not available in the sandbox')
+            check_elements(_array_size_estimate(value), what)
+            arrays.append(value)
+    if len(arrays) >= 2:
+        check_elements(_broadcast_count(*arrays), what)
+
+
+def _check_result(value, what):
+    if isinstance(value, numpy.ndarray) and value.dtype.kind == 'O':
+        forbid(f'{what} made an array of Python objects (e.g. integers too large for int64), which is not '
+               'available in the sandbox')
+    return value
 
 
 # Positional parameter names of the allow-listed functions that have size rules: a rule reads one dict whatever
@@ -674,14 +775,15 @@ def _broadcast_count(*values):
 PARAMETERS = {
     'zeros': ('shape', 'dtype'), 'ones': ('shape', 'dtype'), 'empty': ('shape', 'dtype'),
     'full': ('shape', 'fill_value', 'dtype'), 'zeros_like': ('a', 'dtype', 'order', 'subok', 'shape'),
-    'ones_like': ('a', 'dtype', 'order', 'subok', 'shape'), 'linspace': ('start', 'stop', 'num'),
+    'ones_like': ('a', 'dtype', 'order', 'subok', 'shape'),
+    'linspace': ('start', 'stop', 'num', 'endpoint', 'retstep', 'dtype', 'axis'),
     'eye': ('N', 'M', 'k', 'dtype'), 'identity': ('n', 'dtype'), 'array': ('object', 'dtype'),
     'asarray': ('a', 'dtype'), 'outer': ('a', 'b'), 'kron': ('a', 'b'), 'tile': ('A', 'reps'),
     'repeat': ('a', 'repeats', 'axis'), 'dot': ('a', 'b'), 'matmul': ('x1', 'x2'), 'diff': ('a', 'n', 'axis'),
     'concatenate': ('arrays',), 'stack': ('arrays',), 'vstack': ('tup',), 'hstack': ('tup',),
     'column_stack': ('tup',), 'random': ('size',), 'normal': ('loc', 'scale', 'size'),
     'uniform': ('low', 'high', 'size'), 'randint': ('low', 'high', 'size', 'dtype'),
-    'choice': ('a', 'size', 'replace', 'p'),
+    'choice': ('a', 'size', 'replace', 'p'), 'percentile': ('a', 'q', 'axis'), 'median': ('a', 'axis'),
 }
 
 
@@ -737,12 +839,43 @@ def _rule_tile(p):
     return _size(p.get('A')) * _shape_count(p.get('reps', 1))
 
 
-def _repeat_count(repeats):
-    return int(numpy.max(repeats)) if numpy.size(repeats) else 0
+def repeat_elements(a, repeats, axis):
+    """Elements, or for zero-width chunks the copies, np.repeat makes: numpy loops once per repeated chunk, so
+    repeating an empty row 10 ** 12 times along an axis is 10 ** 12 steps although the result is empty."""
+    shape = _shape_estimate(a) or (1,)
+    if numpy.size(repeats) > LIMITS.max_array_elements:
+        check_elements(numpy.size(repeats), 'np.repeat counts')
+    counts = numpy.asarray(repeats)
+    if counts.dtype.kind not in 'biu' or not counts.size:
+        return 0  # numpy raises its own error (or repeats nothing)
+    try:
+        along = math.prod(shape) if axis is None else shape[operator.index(axis)]
+    except (IndexError, TypeError):
+        return 0  # numpy raises its own error
+    copies = int(counts.max()) * along if counts.size == 1 else int(counts.sum())
+    rest = 1 if axis is None else math.prod(max(d, 1) for i, d in enumerate(shape) if i != axis % len(shape))
+    return max(copies, 0) * rest
 
 
 def _rule_repeat(p):
-    return _size(p.get('a')) * _repeat_count(p.get('repeats', 1))
+    return repeat_elements(p.get('a'), p.get('repeats', 1), p.get('axis'))
+
+
+def _rule_quantile(p):
+    """np.percentile / np.median: one result per quantile and per element of the axes not reduced."""
+    shape = _shape_estimate(p.get('a'))
+    size = math.prod(shape)
+    axis = p.get('axis')
+    if axis is None:
+        kept = 1
+    else:
+        try:
+            axes = {operator.index(ax) % max(len(shape), 1) for ax in (axis if isinstance(axis, (tuple, list))
+                                                                      else (axis,))}
+        except TypeError:
+            return size  # numpy raises its own error
+        kept = math.prod(d for i, d in enumerate(shape) if i not in axes)
+    return max(size, _array_size_estimate(p.get('q', 0)) * kept)
 
 
 def _rule_meshgrid(p, args, kwargs):
@@ -797,6 +930,7 @@ SIZE_RULES = {
     'dot': _rule_matmul, 'matmul': _rule_matmul, 'diff': _rule_diff,
     'random': _rule_size, 'normal': _rule_distribution, 'uniform': _rule_distribution,
     'randint': _rule_distribution, 'choice': _rule_choice,
+    'percentile': _rule_quantile, 'median': _rule_quantile,
 }
 # Rules that need the raw arguments (variadic or position-dependent signatures).
 RAW_SIZE_RULES = {'arange': _rule_arange, 'meshgrid': _rule_meshgrid, 'rand': _rule_shape_args,
@@ -833,11 +967,8 @@ def wrap_numpy_function(name, function):
             check_elements(rule(merged), f'np.{name}')
         elif raw_rule is not None:
             check_elements(raw_rule(merged, args, kwargs), f'np.{name}')
-        else:
-            arrays = [a for a in itertools.chain(args, kwargs.values()) if isinstance(a, _ARRAYS)]
-            if len(arrays) >= 2:
-                check_elements(_broadcast_count(*arrays), f'np.{name}')
-        return function(*args, **kwargs)
+        _check_arguments(itertools.chain(args, kwargs.values()), f'np.{name}')
+        return _check_result(function(*args, **kwargs), f'np.{name}')
     return call
 
 

@@ -16,9 +16,17 @@ import numpy as np
 from cap_llm.errors import RobotApiError, StoppedError
 
 MAX_MESSAGE_BYTES = 4 << 20
-MAX_RESULT_BYTES = 1 << 20  # what the node accepts from the sandbox process: events, calls, results
+MAX_RESULT_BYTES = MAX_MESSAGE_BYTES  # what the node accepts from the sandbox process: events, calls, model
+# requests (with their prompt), results
 _HEADER = struct.Struct('!i')
-MAX_CODE_CHARS = 100_000  # of code and messages the sandbox process sends (a model's answer could be longer)
+MAX_CODE_CHARS = 100_000  # of code and messages the sandbox process sends
+# The longest program that runs: a model answer, and a program with the functions generated for it, of more than
+# 50,000 characters is refused before it is parsed (engine.check_program_size). Far above any policy the prompts
+# produce, and below MAX_CODE_CHARS, so what runs is always shown in full on /cap/code and in the result.
+MAX_PROGRAM_CHARS = 50_000
+# The longest prompt the sandbox process may send for a model request (the session's history grows with every
+# command); it fits a message of MAX_MESSAGE_BYTES.
+MAX_PROMPT_CHARS = 1_000_000
 MEMORY_EXIT_CODE = 3  # the sandbox process' exit status when it ran out of memory
 # Exception types a robot API error travels as, by name; any other error travels as its nearest base among them.
 API_ERRORS: dict[str, type[Exception]] = {

@@ -104,3 +104,10 @@ def test_make_client_picks_the_backend(tmp_path, monkeypatch):
         assert make_client(path, record=True).complete(request).text == "say('hello')"
     replayed = make_client(path).complete(request)
     assert replayed.text == "say('hello')" and replayed.source == 'recorded from model-y'
+
+
+def test_replay_ignores_the_time_budget(tmp_path):
+    path = tmp_path / 'c.yaml'
+    Cassette(path, [CassetteEntry('tabletop_ui', 'say hello', '*', "say('hello')", HAND_WRITTEN)]).save()
+    request = CompletionRequest('tabletop_ui', '# say hello.\n', 'say hello', CONTEXT, time_budget_s=0.0)
+    assert CassetteClient(path).complete(request).text == "say('hello')"

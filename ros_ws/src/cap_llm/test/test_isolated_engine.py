@@ -1,8 +1,9 @@
 """IsolatedEngine: the session runs in a sandbox process, the robot stays here.
 
-The model is a real HTTP server on 127.0.0.1 (the sandbox process talks to it itself); the robot is the in-memory
-table, called through the message channel. The C-level pathologies the in-process sandbox cannot bound (see
-sandbox.py, "What it does not guarantee") end the sandbox process here, never the host.
+The model is a real HTTP server on 127.0.0.1, asked by the node's side for the sandbox process (which sends its
+requests as messages); the robot is the in-memory table, called through the message channel. The C-level
+pathologies the in-process sandbox cannot bound (see sandbox.py, "What it does not guarantee") end the sandbox
+process here, never the host.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import pytest
 from cap_llm import wire
 from cap_llm.engine import CODE, DONE, ERROR, EXECUTING, GENERATING
 from cap_llm.isolated_engine import IsolatedEngine
+from cap_llm.llm import OpenAICompatibleClient
 from cap_llm.sandbox import SandboxLimits
 from cap_llm.testing.openai_server import ScriptedOpenAIServer
 from cap_llm.testing.table import Table
@@ -56,8 +58,7 @@ def table() -> Table:
 
 @pytest.fixture
 def engine(server, table):
-    isolated = IsolatedEngine(table.api(), {'base_url': server.base_url, 'model': 'scripted-model',
-                                            'timeout_s': 10.0},
+    isolated = IsolatedEngine(table.api(), OpenAICompatibleClient(server.base_url, 'scripted-model', timeout_s=10.0),
                               SandboxLimits(time_limit_s=60.0), stall_limit_s=2.0,
                               address_space_extra_bytes=400 << 20)
     yield isolated
@@ -95,7 +96,7 @@ def test_robot_errors_reach_the_program_with_their_message(engine):
 
 
 def test_an_endless_loop_is_stopped_by_the_sandbox_and_the_process_stays(server, table):
-    quick = IsolatedEngine(table.api(), {'base_url': server.base_url, 'model': 'scripted-model'},
+    quick = IsolatedEngine(table.api(), OpenAICompatibleClient(server.base_url, 'scripted-model'),
                            SandboxLimits(time_limit_s=1.0))
     try:
         pid = quick.pid
@@ -196,9 +197,10 @@ def living_processes_in_group(group: int) -> list[int]:
 
 def hostile_engine(mode: str, api=None, **options) -> IsolatedEngine:
     options = {'stall_limit_s': 1.0, 'cancel_grace_s': 0.5, 'start_timeout_s': 10.0, 'send_timeout_s': 1.0,
-               'model_allowance_s': 2.0, **options}
-    return IsolatedEngine(api or {'where': lambda: 'here', 'slow': lambda: time.sleep(2.0)}, {},
-                          SandboxLimits(time_limit_s=2.0),
+               **options}
+    return IsolatedEngine(api or {'where': lambda: 'here', 'slow': lambda: time.sleep(2.0)},
+                          OpenAICompatibleClient('http://127.0.0.1:9', 'no-model'),
+                          options.pop('limits', SandboxLimits(time_limit_s=2.0)),
                           child_command=[sys.executable, '-m', 'cap_llm.testing.hostile_child', mode], **options)
 
 
@@ -222,6 +224,9 @@ def test_a_hostile_sandbox_process_is_killed_with_a_clear_result(mode, reason):
         assert result.stop_reason == reason, result.message
         assert 'session was lost' in result.message
         assert engine.pid != first_pid and engine.restarts == 1
+        deadline = time.monotonic() + 2.0  # SIGKILL was sent to the group; the kernel ends them within moments
+        while living_processes_in_group(first_pid) and time.monotonic() < deadline:
+            time.sleep(0.02)
         assert living_processes_in_group(first_pid) == []  # grandchildren included
         again = engine.run('cmd')  # the new process misbehaves the same way: still a result, never an exception
         assert not again.success and again.stop_reason == reason
@@ -235,7 +240,7 @@ def test_a_hostile_process_that_never_gets_ready_fails_the_start_in_time():
 
 
 def test_a_flood_does_not_hide_a_cancel():
-    engine = hostile_engine('flood', model_allowance_s=600.0)
+    engine = hostile_engine('flood', limits=SandboxLimits(time_limit_s=600.0))
     try:
         threading.Timer(0.3, engine.cancel).start()
         result = engine.run('cmd')
@@ -256,8 +261,27 @@ def test_the_cancel_grace_starts_after_the_robot_call_that_was_running():
 
 
 def test_close_during_a_run_ends_the_run_with_a_result():
-    engine = hostile_engine('flood', model_allowance_s=600.0)
+    engine = hostile_engine('flood', limits=SandboxLimits(time_limit_s=600.0))
     threading.Timer(0.3, engine.close).start()
     result = engine.run('cmd')
     assert not result.success and 'shutting down' in result.message
     assert engine.run('cmd').message.startswith('the sandbox process was closed')
+
+
+def test_the_node_checks_the_model_requests_of_a_hostile_process():
+    """Malformed model requests get an error reply and never reach the model; a well-formed one is answered."""
+    import json
+    with ScriptedOpenAIServer({'the blocks': 'ret_val = 1'}) as scripted:
+        engine = IsolatedEngine({}, OpenAICompatibleClient(scripted.base_url, 'scripted-model', max_retries=0),
+                                SandboxLimits(time_limit_s=5.0), model_time_limit_s=3.0,
+                                child_command=[sys.executable, '-m', 'cap_llm.testing.hostile_child',
+                                               'asks_the_model_badly'])
+        try:
+            result = engine.run('cmd')
+        finally:
+            engine.close()
+        replies = json.loads(result.message)
+        assert all('malformed model request' in reply['error']['message'] for reply in replies[:3]), replies
+        assert replies[3]['completion']['text'] == 'ret_val = 1', replies[3]
+        assert len(scripted.requests) == 1  # only the well-formed request reached the model
+        assert 0 < result.timings['model_s'] < 3.0

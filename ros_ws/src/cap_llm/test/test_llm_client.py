@@ -1,6 +1,9 @@
 """The OpenAI-compatible HTTP client against a real local server speaking the protocol."""
 from __future__ import annotations
 
+import dataclasses
+import time
+
 import pytest
 
 from cap_llm.errors import LLMError
@@ -65,6 +68,55 @@ def test_server_errors_and_timeouts_are_retried(server):
     client = OpenAICompatibleClient(server.base_url, 'm', backoff_s=0.01, timeout_s=0.3, max_retries=3)
     completion = client.complete(request())
     assert completion.text == "say('hello')" and completion.attempts == 4
+
+
+def test_a_connection_closed_mid_answer_is_retried(server):
+    server.push(ScriptedReply(close_after_bytes=20), ScriptedReply(close_after_bytes=0))
+    client = OpenAICompatibleClient(server.base_url, 'm', backoff_s=0.01, max_retries=2)
+    completion = client.complete(request())
+    assert completion.text == "say('hello')" and completion.attempts == 3
+
+
+def test_a_connection_closed_mid_answer_every_time_names_the_cause(server):
+    server.push(*[ScriptedReply(close_after_bytes=20) for _ in range(2)])
+    client = OpenAICompatibleClient(server.base_url, 'm', backoff_s=0.01, max_retries=1)
+    with pytest.raises(LLMError, match=r'no answer after 2 attempts; last: the connection closed mid-answer'):
+        client.complete(request())
+
+
+def test_the_time_budget_bounds_a_slow_model_retries_included(server):
+    """Each slow failure alone is within its timeout (10 s), but two do not fit the 1.5 s budget."""
+    server.push(*[ScriptedReply(status=503, delay_s=1.0) for _ in range(3)])
+    client = OpenAICompatibleClient(server.base_url, 'm', backoff_s=0.01, timeout_s=10.0, max_retries=4)
+    started = time.monotonic()
+    with pytest.raises(LLMError, match=r'no answer within the time budget of 1\.5 s \(2 attempts'):
+        client.complete(dataclasses.replace(request(), time_budget_s=1.5))
+    assert time.monotonic() - started < 1.5 + 0.5
+
+
+def test_the_time_budget_bounds_an_answer_trickled_byte_by_byte(server):
+    server.push(ScriptedReply(trickle_s=0.05))  # some 300 bytes: 15 s, each read well within its timeout
+    client = OpenAICompatibleClient(server.base_url, 'm', backoff_s=0.01, timeout_s=10.0)
+    started = time.monotonic()
+    with pytest.raises(LLMError, match=r'time budget of 1 s \(1 attempt; last: an answer still under way\)'):
+        client.complete(dataclasses.replace(request(), time_budget_s=1.0))
+    assert time.monotonic() - started < 1.0 + 0.5
+
+
+def test_no_backoff_sleep_past_the_budget(server):
+    server.push(ScriptedReply(status=503, headers={'Retry-After': '20'}))
+    slept = []
+    client = OpenAICompatibleClient(server.base_url, 'm', sleep=slept.append, max_retries=3)
+    with pytest.raises(LLMError, match=r'time budget of 5 s \(1 attempt; last: HTTP 503'):
+        client.complete(dataclasses.replace(request(), time_budget_s=5.0))
+    assert slept == [] and len(server.requests) == 1
+
+
+def test_a_budget_that_suffices_changes_nothing(server):
+    server.push(ScriptedReply(status=500))
+    client = OpenAICompatibleClient(server.base_url, 'm', backoff_s=0.01)
+    completion = client.complete(dataclasses.replace(request(), time_budget_s=30.0))
+    assert completion.text == "say('hello')" and completion.attempts == 2
 
 
 def test_retries_are_bounded(server):

@@ -14,6 +14,7 @@ import pytest
 from cap_llm.errors import CodeRejected, ExecutionStopped
 from cap_llm.llm import Completion
 from cap_llm.sandbox import Sandbox, SandboxLimits
+from cap_llm.testing.attack_programs import DISABLE_TRACING
 from cap_llm.testing.sandbox_programs import TEST_LIMITS as LIMITS, run_program as run
 
 
@@ -26,6 +27,7 @@ _CHILD = r'''
 import json, resource, sys, time
 resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))  # a missed limit fails with MemoryError, not an OOM
 from cap_llm.sandbox import Sandbox, SandboxLimits
+from cap_llm.testing.attack_programs import DISABLE_TRACING
 sandbox = Sandbox(SandboxLimits(time_limit_s=1.0, max_memory_growth_bytes=256 << 20))
 said = []
 scope = sandbox.new_scope({'say': lambda text: said.append(str(text))})
@@ -54,22 +56,7 @@ def run_isolated(source: str, timeout: float = 20.0) -> dict:
     return json.loads(done.stdout.splitlines()[-1])
 
 
-_GENERATOR_FINALIZER = '''
-def gen():
-    yield 1
-    yield 2
-def down(rest, box):
-    if rest:
-        return down(rest[1:], box)
-    box[0] = None
-    return 0
-for k in range(300):
-    box = [gen()]
-    next(box[0])
-    down(list(range(k)), box)
-while True:
-    pass
-'''
+_GENERATOR_FINALIZER = DISABLE_TRACING + 'while True:\n    pass\n'
 
 # (description, source): every one must end with a SandboxError in a host that survives (no hang: the child has
 # a hard timeout).
@@ -213,19 +200,21 @@ engine = build_tabletop_engine(Table.with_objects({'red block': (0, -0.5)}).api(
                                Client([keep.format(i) for i in range(4)]),
                                limits=SandboxLimits(time_limit_s=5.0, max_memory_growth_bytes=256 << 20))
 results = [engine.run(f'keep {i}') for i in range(4)]
-print(json.dumps([[r.success, r.stop_reason] for r in results]))
+print(json.dumps([[r.success, r.stop_reason, r.message] for r in results]))
 '''
 
 
 def test_session_variables_count_against_the_memory_limit():
-    """Each command keeps 100 MB in the session: the fourth must be stopped (limit 256 MiB), not the host.
+    """Each command keeps 100 MB in the session: the third must be stopped (limit 256 MiB), not the host; the
+    session, holding more than half the limit, is reset, and the fourth command runs again.
 
     Runs in a fresh process: the resident size of a long test process says little about new allocations."""
     done = subprocess.run([sys.executable, '-c', _SESSION_CHILD], capture_output=True, text=True, timeout=60,
                           env={**os.environ, 'PYTHONPATH': os.pathsep.join(sys.path)})
     assert done.returncode == 0, done.stderr[-300:]
     results = json.loads(done.stdout.splitlines()[-1])
-    assert results[0] == [True, ''] and results[-1] == [False, 'memory'], results
+    assert [r[:2] for r in results] == [[True, ''], [True, ''], [False, 'memory'], [True, '']], results
+    assert 'memory' in results[2][2] and 'so it was reset' in results[2][2], results[2][2]
 
 
 def test_builtin_class_patterns_still_match(sandbox):

@@ -4,7 +4,8 @@
 
 It speaks the framing of engine_process (multiprocessing Connection) and, after the run message, does what `mode`
 says: send half a message, flood heartbeats, call the robot without reading replies, send malformed messages, die of
-a real-time signal, fork a grandchild that keeps the socket, or behave but answer a stop late.
+a real-time signal, fork a grandchild that keeps the socket, send malformed model requests, or behave but
+answer a stop late.
 """
 from __future__ import annotations
 
@@ -63,6 +64,14 @@ def main() -> None:
                 send({'op': 'alive'})
                 time.sleep(0.01)
         os._exit(1)
+    elif mode == 'asks_the_model_badly':  # malformed model requests, then one asking for a day of model time
+        replies = []
+        for request in ({'lmp': 'x', 'prompt': 7}, {'lmp': 'x', 'prompt': 'p' * (2 * 10 ** 6)}, 'not a request',
+                        {'lmp': 'tabletop_ui', 'prompt': '# the blocks.\n', 'query': 'the blocks',
+                         'time_budget_s': 86400.0}):
+            send({'op': 'complete', 'id': len(replies) + 1, 'request': request})
+            replies.append(json.loads(data.recv_bytes()))
+        send({'op': 'result', 'result': {**RESULT, 'message': json.dumps(replies)[:5000]}})
     elif mode == 'slow_robot_then_result':
         send({'op': 'call', 'id': 1, 'name': 'slow', 'args': [], 'kwargs': {}})
         data.recv_bytes()

@@ -2,7 +2,8 @@
 
 For tests and offline demos: it answers `POST /v1/chat/completions` and `POST /v1/completions` (also without the
 `/v1` prefix) from rules that match the query of the prompt, and can be told to fail or stall first (429, 500,
-a delay longer than the client's timeout). It records every request it received.
+a delay longer than the client's timeout, a connection closed mid-answer, an answer trickled out byte by byte).
+It records every request it received.
 
     with ScriptedOpenAIServer({'put the red block': 'say("ok")'}) as server:
         client = OpenAICompatibleClient(server.base_url, model=server.model)
@@ -20,12 +21,18 @@ from typing import Any, Callable, Mapping
 
 @dataclass
 class ScriptedReply:
-    """A one-off reply served before the rules: a status with an error, a delay, or a fixed text."""
+    """A one-off reply served before the rules: a status with an error, a delay, or a fixed text.
+
+    `close_after_bytes`: announce the whole body, send only this many bytes of it and close the connection.
+    `trickle_s`: send the body one byte at a time, this long apart (each read of the client then succeeds quickly).
+    """
 
     status: int = 200
     text: str | None = None
     delay_s: float = 0.0
     headers: dict[str, str] = field(default_factory=dict)
+    close_after_bytes: int | None = None
+    trickle_s: float = 0.0
 
 
 @dataclass
@@ -112,21 +119,23 @@ class ScriptedOpenAIServer:
         with self._lock:
             return self._queue.popleft() if self._queue else None
 
-    def _respond(self, path: str, request: RecordedRequest) -> tuple[int, dict[str, Any], dict[str, str]]:
+    def _respond(self, path: str, request: RecordedRequest
+                 ) -> tuple[int, dict[str, Any], dict[str, str], ScriptedReply | None]:
         with self._lock:
             self.requests.append(request)
         chat = path.endswith('/chat/completions')
         if not chat and not path.endswith('/completions'):
-            return 404, {'error': {'message': f'no endpoint {path}'}}, {}
+            return 404, {'error': {'message': f'no endpoint {path}'}}, {}, None
         scripted = self._next_scripted()
         if scripted is not None:
             if scripted.delay_s:
                 time.sleep(scripted.delay_s)
             if scripted.status != 200:
-                return scripted.status, {'error': {'message': f'scripted status {scripted.status}'}}, scripted.headers
+                return (scripted.status, {'error': {'message': f'scripted status {scripted.status}'}},
+                        scripted.headers, scripted)
         text = scripted.text if scripted is not None and scripted.text is not None else self.answer_for(request)
         if text is None:
-            return 400, {'error': {'message': f'no scripted answer for {last_query_line(request.prompt)!r}'}}, {}
+            return 400, {'error': {'message': f'no scripted answer for {last_query_line(request.prompt)!r}'}}, {}, None
         usage = {'prompt_tokens': len(request.prompt.split()), 'completion_tokens': len(text.split())}
         usage['total_tokens'] = usage['prompt_tokens'] + usage['completion_tokens']
         if chat:
@@ -138,7 +147,7 @@ class ScriptedOpenAIServer:
             kind = 'text_completion'
         body = {'id': f'scripted-{len(self.requests)}', 'object': kind, 'created': int(time.time()),
                 'model': request.body.get('model') or self.model, 'choices': [choice], 'usage': usage}
-        return 200, body, {}
+        return 200, body, {}, scripted
 
 
 def _handler_for(server: ScriptedOpenAIServer) -> type[BaseHTTPRequestHandler]:
@@ -151,13 +160,13 @@ def _handler_for(server: ScriptedOpenAIServer) -> type[BaseHTTPRequestHandler]:
             try:
                 body = json.loads(raw or b'{}')
             except ValueError:
-                self._send(400, {'error': {'message': 'the request body is not JSON'}}, {})
+                self._send(400, {'error': {'message': 'the request body is not JSON'}}, {}, None)
                 return
             request = RecordedRequest(self.path, {k.lower(): v for k, v in self.headers.items()}, body)
-            status, payload, headers = server._respond(self.path, request)
-            self._send(status, payload, headers)
+            self._send(*server._respond(self.path, request))
 
-        def _send(self, status: int, payload: dict[str, Any], headers: dict[str, str]) -> None:
+        def _send(self, status: int, payload: dict[str, Any], headers: dict[str, str],
+                  scripted: ScriptedReply | None) -> None:
             data = json.dumps(payload).encode()
             try:
                 self.send_response(status)
@@ -166,7 +175,17 @@ def _handler_for(server: ScriptedOpenAIServer) -> type[BaseHTTPRequestHandler]:
                 for key, value in headers.items():
                     self.send_header(key, value)
                 self.end_headers()
-                self.wfile.write(data)
+                if scripted is not None and scripted.close_after_bytes is not None:
+                    self.wfile.write(data[:scripted.close_after_bytes])
+                    self.wfile.flush()
+                    self.close_connection = True
+                elif scripted is not None and scripted.trickle_s:
+                    for index in range(len(data)):
+                        self.wfile.write(data[index:index + 1])
+                        self.wfile.flush()
+                        time.sleep(scripted.trickle_s)
+                else:
+                    self.wfile.write(data)
             except (BrokenPipeError, ConnectionResetError):
                 pass  # the client gave up (timeout test)
 
