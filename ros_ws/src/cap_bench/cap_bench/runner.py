@@ -6,7 +6,13 @@ cassette, or a model's code from an OpenAI-compatible endpoint) runs in the sand
 pick-and-place over ROS, and the result is judged on the simulator's final state by cap_bench.success.
 
 Results are appended to episodes.jsonl as each episode ends, so an interrupted run resumes where it stopped
-(--resume). Parallel jobs run separate graphs in separate processes, each on its own ROS_DOMAIN_ID.
+(--resume). Parallel jobs run separate graphs in separate processes, each on its own ROS_DOMAIN_ID: with
+ROS_DOMAIN_ID set in the environment, job i (0 <= i < --jobs) uses ROS_DOMAIN_ID + i, so `--jobs 4` with
+ROS_DOMAIN_ID=20 occupies domains 20-23; without it the first id is derived from the process id (in 1..101, the
+ids whose DDS ports stay below Linux's ephemeral range).
+
+SIGINT (Ctrl-C) or SIGTERM stops the run: the workers close their graphs, the episodes finished so far stay in
+episodes*.jsonl, and the command exits 130 or 143 (continue later with --resume).
 """
 from __future__ import annotations
 
@@ -16,6 +22,8 @@ import json
 import multiprocessing
 import os
 import pathlib
+import queue
+import signal
 import sys
 import time
 from typing import Any, Iterable
@@ -28,8 +36,10 @@ from cap_bench.oracle import oracle_program
 from cap_bench.report import write_report
 from cap_bench.success import check
 from cap_bench.templates import GROUPS, TEMPLATES
+from cap_llm.safe_text import terminal_text
 
 SETTLE_S = 0.5  # simulated time the scene settles after the program before it is judged
+MAX_DOMAIN_ID = 232  # the largest ROS_DOMAIN_ID whose DDS ports are valid
 
 
 @dataclasses.dataclass
@@ -47,7 +57,25 @@ class BenchOptions:
     model: str = ''
     api: str = 'chat'
     episode_timeout_s: float = 900.0
-    first_domain_id: int = 0  # 0: derived from the process id
+    first_domain_id: int | None = None  # job i runs on first_domain_id + i; None: see domain_ids()
+
+
+def domain_ids(jobs: int, first: int | None = None, environ: dict[str, str] | None = None) -> list[int]:
+    """The ROS_DOMAIN_ID of each of `jobs` parallel graphs: consecutive ids from `first`, else from the
+    environment's ROS_DOMAIN_ID, else from a process-id-dependent start in 1..101."""
+    environ = os.environ if environ is None else environ
+    jobs = max(1, jobs)
+    if first is None and environ.get('ROS_DOMAIN_ID', '').strip():
+        text = environ['ROS_DOMAIN_ID'].strip()
+        if not text.isdigit():
+            raise ValueError(f'ROS_DOMAIN_ID={text!r} is not a domain id (an integer in 0..{MAX_DOMAIN_ID})')
+        first = int(text)
+    if first is None:
+        first = 1 + os.getpid() % max(1, 101 - jobs)
+    if first < 0 or first + jobs - 1 > MAX_DOMAIN_ID:
+        raise ValueError(f'{jobs} job(s) need ROS_DOMAIN_IDs {first}..{first + jobs - 1}, beyond 0..{MAX_DOMAIN_ID}:'
+                         f' choose a smaller ROS_DOMAIN_ID or fewer --jobs')
+    return list(range(first, first + jobs))
 
 
 def plan(options: BenchOptions) -> list[Episode]:
@@ -207,6 +235,9 @@ class _EpisodeRunner:
 
 def _worker(index: int, keys: list[str], options: BenchOptions, cassette: str | None, results: str,
             progress) -> None:
+    # Ctrl-C reaches every process of the terminal's group: the parent alone decides, and ends workers by SIGTERM
+    # (which closes the graph: see cap_llm.graph.Graph).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # Each worker is a graph of its own: keep it on a DDS domain of its own.
     os.environ['ROS_DOMAIN_ID'] = str(options.first_domain_id + index)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -248,8 +279,7 @@ def run_benchmark(options: BenchOptions, show_progress: bool = True) -> dict:
     if options.policy == 'oracle':
         cassette = out_dir / 'oracle_cassette.yaml'
         write_oracle_cassette(episodes, cassette)
-    if options.first_domain_id == 0:
-        options.first_domain_id = 1 + os.getpid() % (101 - max(1, options.jobs))
+    options.first_domain_id = domain_ids(options.jobs, options.first_domain_id)[0]
     (out_dir / 'options.json').write_text(json.dumps(dataclasses.asdict(options), indent=2))
     started = time.monotonic()
     jobs = max(1, min(options.jobs, len(todo)))
@@ -282,21 +312,31 @@ def _run_shards(shards, options, cassette, out_dir, show_progress, total, alread
                        TimeRemainingColumn())
         bar.start()
         task = bar.add_task('episodes', total=total, completed=already, ok='')
+    interrupted = False
     try:
         while any(p.is_alive() for p in processes) or not progress.empty():
             try:
                 success = progress.get(timeout=0.5)
-            except Exception:  # queue.Empty: nothing finished in this half second
+            except queue.Empty:  # nothing finished in this half second
                 continue
             finished += 1
             successes += bool(success)
             if bar is not None:
                 bar.update(task, completed=finished, ok=f'{successes}/{finished - already} succeeded')
+    except BaseException:  # Ctrl-C, SIGTERM (see main): end the workers, each closing its graph
+        interrupted = True
+        for process in processes:
+            if process.is_alive():
+                process.terminate()
+        raise
     finally:
         if bar is not None:
             bar.stop()
         for process in processes:
-            process.join()
+            process.join(timeout=30 if interrupted else None)
+            if process.is_alive():  # a worker that did not close in time
+                process.kill()
+                process.join()
     failed = [p.exitcode for p in processes if p.exitcode]
     if failed:
         raise RuntimeError(f'{len(failed)} benchmark worker(s) failed (exit codes {failed}); see the log above. '
@@ -313,7 +353,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--trials', type=int, default=50, help='episodes per row [50]')
     parser.add_argument('--perception', choices=('ground_truth', 'rgbd'), default='ground_truth')
     parser.add_argument('--seed', type=int, default=0, help='base seed: trial i uses seed base + i [0]')
-    parser.add_argument('--jobs', type=int, default=1, help='parallel graphs (processes) [1]')
+    parser.add_argument('--jobs', type=int, default=1,
+                        help='parallel graphs (processes) [1]; job i uses ROS_DOMAIN_ID + i when ROS_DOMAIN_ID is '
+                             'set, else consecutive ids from a start derived from the process id')
     parser.add_argument('--out', default='output/bench', help='output folder [output/bench]')
     parser.add_argument('--resume', action='store_true', help='keep the episodes already in --out')
     parser.add_argument('--base-url', default='', help='for --policy llm; default CAP_LLM_BASE_URL')
@@ -321,6 +363,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--api', choices=('chat', 'completions'), default='chat')
     parser.add_argument('--episode-timeout', type=float, default=900.0, help='per episode [s]')
     return parser
+
+
+class Interrupted(BaseException):
+    """SIGINT or SIGTERM arrived: stop the run (a BaseException, like KeyboardInterrupt: no handler swallows it)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.exit_code = 128 + signum
+
+
+def _raise_interrupted(signum, _frame) -> None:
+    raise Interrupted(signum)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -336,8 +390,23 @@ def main(argv: list[str] | None = None) -> int:
                            perception=args.perception, base_seed=args.seed, jobs=args.jobs, out=args.out,
                            resume=args.resume, base_url=args.base_url, model=args.model, api=args.api,
                            episode_timeout_s=args.episode_timeout)
-    summary = run_benchmark(options)
-    print((pathlib.Path(args.out) / 'report.md').read_text())
+    try:
+        domain_ids(options.jobs)
+    except ValueError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _raise_interrupted)
+    try:
+        summary = run_benchmark(options)
+    except Interrupted as interrupted:
+        done = len(load_records(pathlib.Path(args.out)))
+        print(f'interrupted ({interrupted}): {done} episode(s) are in {args.out}; continue with --resume',
+              file=sys.stderr)
+        return interrupted.exit_code
+    # The report quotes the programs' messages: never a raw control character on the terminal.
+    report = (pathlib.Path(args.out) / 'report.md').read_text(encoding='utf-8')
+    print(terminal_text(report, limit=len(report)))
     print(json.dumps({'overall_percent': summary['overall']['percent'], 'episodes': summary['episodes'],
                       'wall_seconds': round(summary['wall_seconds_this_run'], 1), 'out': args.out}))
     return 0

@@ -7,7 +7,8 @@ By default every answer comes from the demo cassette of hand-written reference p
 CAP_LLM_API_KEY); add `--record --cassette new.yaml` to keep its answers. The demo prints each command, the code
 that ran, what the robot said and the outcome; it checks each outcome against what the command should do on the
 simulator's state, and writes before/after images per command and a video of the whole run into the output folder.
-Exit code 0 when every command had its expected outcome.
+Exit code 0 when every command had its expected outcome; 130 / 143 when ended by Ctrl-C / SIGTERM (the graph is
+closed first). Everything printed that comes from the graph has its control characters escaped.
 """
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+
+from cap_llm.safe_text import terminal_text
 
 DEMO_CASSETTE = pathlib.Path(__file__).resolve().parent / 'cassettes' / 'tabletop_demo.yaml'
 
@@ -200,7 +203,7 @@ def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '
         if video:
             recorder = VideoRecorder(graph.world, out_dir / 'demo.mp4')
         for index, step in enumerate(steps, start=1):
-            log(f'\n[{index}/{len(steps)}] > {step.command}')
+            log(f'\n[{index}/{len(steps)}] > {terminal_text(step.command)}')
             before = _state(graph.world)
             _save_png(graph.world, out_dir / 'commands' / f'{index:02d}-before.png')
             said.clear()
@@ -219,12 +222,13 @@ def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '
             if step.message_must_name and step.message_must_name not in result.message:
                 problems.append(f'the message does not name {step.message_must_name!r}')
             problems += [p for p in (check(before, after, list(said)) for check in step.checks) if p]
-            log('code:\n' + '\n'.join('    ' + line for line in result.code.splitlines()))
+            # Code, said lines and messages come from the graph: never a raw control character on the terminal.
+            log('code:\n' + '\n'.join('    ' + line for line in terminal_text(result.code).splitlines()))
             for text in said:
-                log(f'robot says: {text}')
-            log(f'outcome: {outcome}' + (f' ({result.message})' if not result.success else '')
+                log(f'robot says: {terminal_text(text)}')
+            log(f'outcome: {outcome}' + (f' ({terminal_text(result.message)})' if not result.success else '')
                 + f'; {graph.world.time - sim_started:.1f} s simulated, {time.monotonic() - wall_started:.1f} s wall')
-            log('expected outcome: ' + ('yes' if not problems else 'NO: ' + '; '.join(problems)))
+            log('expected outcome: ' + ('yes' if not problems else 'NO: ' + terminal_text('; '.join(problems))))
             summary['steps'].append({'command': step.command, 'expected': step.expect, 'outcome': outcome,
                                      'as_expected': not problems, 'problems': problems, 'code': result.code,
                                      'said': list(said), 'message': result.message,
@@ -278,8 +282,12 @@ def main(argv=None) -> int:
     parser.add_argument('--perception', choices=('ground_truth', 'rgbd'), default='ground_truth')
     parser.add_argument('--no-video', action='store_true')
     args = parser.parse_args(argv)
-    summary = run_demo(args.out, args.backend, args.cassette, args.record, args.perception,
-                       video=not args.no_video)
+    try:  # SIGTERM raises SystemExit(143) once the graph is up (cap_llm.graph.Graph); both close the graph
+        summary = run_demo(args.out, args.backend, args.cassette, args.record, args.perception,
+                           video=not args.no_video)
+    except KeyboardInterrupt:
+        print('interrupted (SIGINT)', file=sys.stderr)
+        return 130
     good = sum(s['as_expected'] for s in summary['steps'])
     print(f'\n{good}/{len(STEPS)} commands had their expected outcome in {summary["wall_seconds"]:.0f} s.')
     print(f'Images, video and summary.json are in {summary["output"]}')
