@@ -126,6 +126,41 @@ def test_target_outside_the_workspace_is_refused_before_the_arm_moves(graph, spi
     np.testing.assert_allclose(world.joint_positions(), before, atol=1e-3)
 
 
+def test_edge_and_taken_targets_are_refused_then_a_relative_move_ends_within_a_centimetre(graph, spin_until):
+    """Targets that would leave the block over the table's edge, or set it down on another block, are refused
+    before the arm moves; the block stays on the table, and the next pick-and-place, "5 cm to the bottom" of
+    where it is, ends within 1 cm of its target on the simulator's ground truth."""
+    executor, world, action, _ = graph
+    red_before = world.object_state('red block').position
+    joints_before = world.joint_positions()
+    green = world.object_state('green block').position
+    for target, words in (((-0.3, -0.2), ['(-0.300, -0.200)', 'too close to the table\'s edge',
+                                          'x in [-0.270, 0.270], y in [-0.770, -0.230]']),
+                          ((0.3, -0.8), ['(0.300, -0.800)', 'x in [-0.270, 0.270], y in [-0.770, -0.230]']),
+                          ((green[0], green[1] + 0.02), ['the green block at', 'in the way'])):
+        response = finish(spin_until, executor, send(spin_until, executor, action, object_name='red block',
+                                                     target_position=Point(x=target[0], y=target[1], z=0.0)))
+        assert response.status == GoalStatus.STATUS_ABORTED
+        assert response.result.error_code == Result.OUTSIDE_WORKSPACE
+        for word in words:
+            assert word in response.result.error_msg
+    np.testing.assert_allclose(world.joint_positions(), joints_before, atol=1e-3)
+    red = world.object_state('red block')
+    assert math.dist(red.position, red_before) < 1e-3, 'the block stayed where it was, on the table'
+
+    target = (red_before[0], red_before[1] - 0.05)
+    response = finish(spin_until, executor, send(spin_until, executor, action, object_name='red block',
+                                                 target_position=Point(x=target[0], y=target[1], z=0.0)))
+    assert response.result.error_code == Result.NONE, response.result.error_msg
+    world_time = world.time
+    assert spin_until(executor, lambda: world.time > world_time + 0.5, timeout=10.0)
+    red = world.object_state('red block')
+    assert math.dist(red.position[:2], target) < 0.01
+    assert red.position[2] == pytest.approx(0.02, abs=0.003), 'resting flat on the table'
+    final = response.result.final_position
+    assert math.dist((final.x, final.y, final.z), red.position) < 0.005, 'the reported place is the real one'
+
+
 def test_unknown_object_and_target_are_named_in_the_error(graph, spin_until):
     executor, _, action, _ = graph
     response = finish(spin_until, executor, send(spin_until, executor, action, object_name='purple block',

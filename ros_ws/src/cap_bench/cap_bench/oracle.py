@@ -37,9 +37,18 @@ def oracle_program(episode: Episode) -> str:
                           "    put_first_on_second(upper, lower)\n")
     if template == 'blocks_on_corner':
         # Two short stacks side by side, far enough apart (7.5 cm) that the open fingers clear the neighbour
-        # whichever way they close: every block within 0.04 m of the place, and no tower tall enough to topple.
+        # whichever way they close: every block within 0.045 m of the place, and no tower tall enough to topple.
+        # The pair stands across the line to the table's middle, 1.5 cm in from the place, so that at a corner
+        # neither block hangs over an edge. The blocks nearest the place go first, so that none still stands on a
+        # spot when a block is set down there.
         return (_BLOCKS + f"target_xy = {_position(a['corner_side'])}\n"
-                          "spots = [target_xy + np.array([-0.0375, 0.0]), target_xy + np.array([0.0375, 0.0])]\n"
+                          "block_names = sorted(block_names, key=lambda name: np.linalg.norm(get_obj_pos(name) - "
+                          "target_xy))\n"
+                          f"inward = np.array({list(table.SIDES['middle'])}) - target_xy\n"
+                          "inward = inward / np.linalg.norm(inward)\n"
+                          "along = np.array([-inward[1], inward[0]])\n"
+                          "spots = [target_xy + 0.015 * inward - 0.0375 * along, "
+                          "target_xy + 0.015 * inward + 0.0375 * along]\n"
                           "for i, name in enumerate(block_names):\n"
                           "    if i < 2:\n"
                           "        put_first_on_second(name, spots[i])\n"

@@ -15,10 +15,19 @@ workspace is reported before the arm starts. An executor (the ROS node) runs the
 Stages (names as in PickPlace.action feedback): approach above the object with the gripper open, descend, close
 (grasp), verify the grasp (finger gap and the fingers stalling on the object), lift (the fingers still apart),
 move above the target, place (descend until contact or the target's height: onto a block's top, into a bowl down
-to its floor, onto the table), release, retreat (and see the object near the target).
+to its floor, onto the table), release, retreat (and see the object on the table, near the target).
 
-Workspace limits are enforced here whatever the caller asks: an object or target outside the table bounds is
-refused with OUTSIDE_WORKSPACE, and no TCP pose goes below the table's safety height.
+Workspace limits are enforced here whatever the caller asks, before anything moves, with OUTSIDE_WORKSPACE and a
+message that names the target and what is allowed:
+- an object to pick outside the table bounds is refused;
+- a place that would leave any of the placed object over the table's edge is refused: its centre must lie within
+  the table less half its footprint and `edge_margin` (`allowed_target_range`), on the table or on the block or in
+  the bowl it goes onto;
+- a point of the table where the object would come down on another block is refused (it would slide off that
+  block's edge and end beside it, tilted): the caller names the block to stack onto instead.
+No TCP pose goes below the table's safety height. After the retreat, an object seen off the table (fallen), not
+resting on it where placed at a point, or farther from the target than the tolerance fails the pick-and-place with
+OBJECT_DROPPED and the reason, so the result matches where the object really is.
 """
 from __future__ import annotations
 
@@ -193,8 +202,17 @@ class PickPlaceConfig:
     clear_view_distance: float = 0.20  # [m]; 0.12 left far targets on the centre line hidden by the forearm
     # Tracking error [rad] that the executor reads as contact during a stop-on-contact descent.
     contact_tolerance: float = 0.002
-    # After retreating, the object must lie this close (xy) to the target; farther, it was dropped on the way.
+    # After retreating, the object must lie this close (xy) to the target object; farther, it was dropped on the
+    # way. Placed at a point of the table, it must lie within point_place_tolerance of it.
     place_tolerance: float = 0.08
+    point_place_tolerance: float = 0.03
+    # A target is allowed only where the whole placed object stays this far inside the table's edges.
+    edge_margin: float = 0.01
+    # ... and off the footprints of the other blocks by this much (0: not overlapping them): set down on another
+    # block's edge, a block slides off and ends beside it, 1.4-3.5 cm from the point, or leaning on it, tilted.
+    target_room: float = 0.0
+    # Placed at a point, the object must rest on the table: its centre at most this much above half its height.
+    resting_tolerance: float = 0.015
     # Largest sag of a joint-space move below its endpoints' height before a straight line is used instead.
     allowed_sag: float = 0.03
     joint_limits: JointLimits = UR5E_LIMITS
@@ -288,11 +306,13 @@ class LiftCheck:
 
 @dataclass(frozen=True)
 class PlacedCheck:
-    """The object ended within `tolerance` [m] (xy) of the target point (judged only where it is seen)."""
+    """The object ended on the table, within `tolerance` [m] (xy) of the target point (judged where it is seen)."""
 
     object_name: str
     target_xy: tuple[float, float]
     tolerance: float
+    workspace: Workspace | None = None  # the table the object must still be on; None: not checked
+    max_height: float | None = None  # highest centre of an object resting on the table; None: not checked
     needs_object_position = True
 
     def failure(self, observation: Observation) -> str | None:
@@ -300,9 +320,18 @@ class PlacedCheck:
             return f'the {self.object_name} was not found after placing'
         if not observation.object_visible:
             return None
+        if self.workspace is not None:
+            reason = off_table_reason(self.object_name, observation.object_position, self.workspace)
+            if reason:
+                return reason
+        if self.max_height is not None and observation.object_position[2] > self.max_height:
+            return f'the {self.object_name} did not come to rest on the table at ({self.target_xy[0]:.3f}, ' \
+                   f'{self.target_xy[1]:.3f}): its centre is {observation.object_position[2]:.3f} m high, on top ' \
+                   f'of something'
         miss = math.dist(observation.object_position[:2], self.target_xy)
         if miss > self.tolerance:
-            return f'the {self.object_name} ended {miss:.3f} m from the target (allowed {self.tolerance:.3f} m)'
+            return f'the {self.object_name} ended {miss:.3f} m from the target ({self.target_xy[0]:.3f}, ' \
+                   f'{self.target_xy[1]:.3f}), more than the {self.tolerance:.3f} m allowed'
         return None
 
 
@@ -495,6 +524,90 @@ def _clear_view_step(planner: '_Planner', place_xy: Sequence[float], travel_z: f
     return None
 
 
+def footprint_half_extents(obj: ObjectInfo) -> tuple[float, float]:
+    """Half the world x and y extents of the object's footprint, whichever quarter turn it is placed at.
+
+    The place keeps the held object's faces turned as they were (or a quarter turn from that), so the footprint
+    is the object's own, turned by its yaw; a bowl is round.
+    """
+    if obj.category == CATEGORY_BOWL:
+        radius = max(obj.size[:2]) / 2
+        return radius, radius
+    along, across = obj.size[0], obj.size[1]
+    c, s = abs(math.cos(obj.yaw)), abs(math.sin(obj.yaw))
+    x = max(along * c + across * s, across * c + along * s) / 2
+    y = max(along * s + across * c, across * s + along * c) / 2
+    return x, y
+
+
+def allowed_target_range(obj: ObjectInfo, config: PickPlaceConfig) -> tuple[tuple[float, float],
+                                                                               tuple[float, float]]:
+    """The x and y ranges [m] of a place point that keep all of `obj` on the table, `edge_margin` to spare.
+
+    Empty (low > high) when the object is too large for the table.
+    """
+    workspace = config.workspace
+    half_x, half_y = footprint_half_extents(obj)
+    reach_x, reach_y = half_x + config.edge_margin, half_y + config.edge_margin
+    return (workspace.x_min + reach_x, workspace.x_max - reach_x), (workspace.y_min + reach_y,
+                                                                    workspace.y_max - reach_y)
+
+
+def check_place_on_table(obj: ObjectInfo, place_xy: Sequence[float], config: PickPlaceConfig,
+                         support: str | None = None) -> None:
+    """Raise OUTSIDE_WORKSPACE unless `obj`, placed with its centre at `place_xy`, lies wholly on the table.
+
+    `support` names what it would be placed on (None: the table at that point) for the message.
+    """
+    (x_low, x_high), (y_low, y_high) = allowed_target_range(obj, config)
+    x, y = float(place_xy[0]), float(place_xy[1])
+    if x_low <= x <= x_high and y_low <= y <= y_high:
+        return
+    workspace = config.workspace
+    half_x, half_y = footprint_half_extents(obj)
+    point = f'({x:.3f}, {y:.3f})'
+    where = f'the target point {point}' if support is None else f'the {support} at {point}'
+    why = 'is outside the workspace' if not workspace.contains_xy(x, y) else 'is too close to the table\'s edge'
+    raise PickPlaceError(
+        PickPlaceErrorCode.OUTSIDE_WORKSPACE,
+        f'cannot place the {obj.name} there: {where} {why}: the {obj.name} would not be wholly on the table. '
+        f'Allowed for its centre: x in [{x_low:.3f}, {x_high:.3f}], y in [{y_low:.3f}, {y_high:.3f}] '
+        f'(the table {workspace.describe()}, less half the {obj.name}\'s footprint, {half_x * 100:.1f} x '
+        f'{half_y * 100:.1f} cm, and a {config.edge_margin * 100:.1f} cm margin)')
+
+
+def target_taken_by(obj: ObjectInfo, place_xy: Sequence[float], neighbours: Sequence[ObjectInfo],
+                    config: PickPlaceConfig) -> ObjectInfo | None:
+    """The block that `obj`, set down on the table with its centre at `place_xy`, would come down on, if any.
+
+    Footprints are compared as world-axis boxes (a turned block's box is larger than the block: it errs on the
+    safe side). Bowls are not in the way: a point inside one puts the object into it, and a bowl's sloping wall
+    pushes an object set down on the rim outwards onto the table beside it (1.4-2.5 cm from the point, measured),
+    which the check after placing judges.
+    """
+    half_x, half_y = footprint_half_extents(obj)
+    for other in neighbours:
+        if other.name == obj.name or other.category == CATEGORY_BOWL:
+            continue
+        dx, dy = abs(place_xy[0] - other.position[0]), abs(place_xy[1] - other.position[1])
+        other_x, other_y = footprint_half_extents(other)
+        if dx < half_x + other_x + config.target_room and dy < half_y + other_y + config.target_room:
+            return other
+    return None
+
+
+def off_table_reason(name: str, position: Sequence[float], workspace: Workspace) -> str | None:
+    """Why an object seen at `position` (its centre) is no longer on the table, or None if it is on it."""
+    x, y, z = (float(v) for v in position[:3])
+    if z < workspace.table_z:
+        return f'the {name} fell off the table: it is at ({x:.3f}, {y:.3f}), {workspace.table_z - z:.2f} m below ' \
+               f'the table top'
+    if not workspace.contains_xy(x, y):
+        return f'the {name} fell off the table: it is at ({x:.3f}, {y:.3f}), outside the table ' \
+               f'({workspace.describe()})'
+    return None
+
+
 def _target_point(target: Target) -> tuple[float, float]:
     if isinstance(target, ObjectInfo):
         return float(target.position[0]), float(target.position[1])
@@ -523,11 +636,10 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
                              f'workspace ({workspace.describe()})')
     target_description = f'the {target_object.name}' if target_object else \
         f'({target_xy[0]:.3f}, {target_xy[1]:.3f})'
-    if not workspace.contains_xy(*target_xy):
-        where = f'{target_object.name} at ' if target_object else 'point '
+    if target_object is not None and not workspace.contains_xy(*target_xy):
         raise PickPlaceError(PickPlaceErrorCode.OUTSIDE_WORKSPACE,
-                             f'the target {where}({target_xy[0]:.3f}, {target_xy[1]:.3f}) is outside the workspace '
-                             f'({workspace.describe()})')
+                             f'the target {target_object.name} at ({target_xy[0]:.3f}, {target_xy[1]:.3f}) is outside '
+                             f'the workspace ({workspace.describe()})')
     if target_object is not None and target_object.name == obj.name:
         raise PickPlaceError(PickPlaceErrorCode.TARGET_NOT_FOUND, f'cannot place the {obj.name} on itself')
 
@@ -552,6 +664,17 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     if target_object is not None and target_object.category == CATEGORY_BOWL:
         support = top_block_in_bowl(target_object, neighbours) or target_object
     place_xy = target_xy if support is None else (float(support.position[0]), float(support.position[1]))
+    # All of the placed object must be over the table (on a block or in a bowl near the edge too): an
+    # overhanging one topples off, or the fingers push it off.
+    check_place_on_table(obj, place_xy, config, support.name if support is not None else None)
+    if support is None:
+        taken = target_taken_by(obj, place_xy, neighbours, config)
+        if taken is not None:
+            raise PickPlaceError(
+                PickPlaceErrorCode.OUTSIDE_WORKSPACE,
+                f'cannot place the {obj.name} at ({place_xy[0]:.3f}, {place_xy[1]:.3f}): the {taken.name} at '
+                f'({taken.position[0]:.3f}, {taken.position[1]:.3f}) is in the way (the {obj.name} would '
+                f'come down on it and slide off, tilted). Choose a free spot, or put it on the {taken.name} by name')
     if support is None:
         place_z = table_z + held_below_tcp + config.place_clearance
     elif support.category == CATEGORY_BOWL:
@@ -614,7 +737,9 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
         Stage(StageName.MOVE, [move], failure_code=PickPlaceErrorCode.IK_FAILED),
         Stage(StageName.PLACE, [place], failure_code=PickPlaceErrorCode.IK_FAILED),
         Stage(StageName.RELEASE, [GripperStep(release_width)]),
-        Stage(StageName.RETREAT, retreat, [PlacedCheck(obj.name, target_xy, config.place_tolerance)],
+        Stage(StageName.RETREAT, retreat, [PlacedCheck(
+            obj.name, target_xy, config.place_tolerance if target_object else config.point_place_tolerance,
+            workspace, None if target_object else table_z + obj.size[2] / 2 + config.resting_tolerance)],
               PickPlaceErrorCode.OBJECT_DROPPED),
     ]
     for index, stage in enumerate(stages):

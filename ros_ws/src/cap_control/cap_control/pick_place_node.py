@@ -5,6 +5,11 @@ anything moves, then its stages run one by one with feedback per stage. A cancel
 message on the stop topic, cancels the running arm or gripper goal at once (the arm holds where it is) and ends
 the goal with CANCELLED.
 
+A goal the plan refuses (a target off the table's usable area, or on another block: OUTSIDE_WORKSPACE) is aborted
+before the arm moves, with error_code and an error_msg that names the target and what is allowed. After the
+retreat the node waits for perception to answer from an observation made after it, and a placed object seen off
+the table or away from its target fails the goal (OBJECT_DROPPED), so the result agrees with where it really is.
+
 Threading: every callback is in one reentrant group, and main() spins a MultiThreadedExecutor, so the execute
 callback may wait on service and action futures that other executor threads complete.
 """
@@ -93,7 +98,13 @@ class PickPlaceNode(Node):
             contact_tolerance=p('contact_tolerance', 0.002, 'Joint tracking error read as contact while placing '
                                 '[rad] (sent as the path tolerance of the place descent).'),
             place_tolerance=p('place_tolerance', 0.08, 'Largest xy distance of the placed object from the target '
-                              '[m] before the result reports it dropped.'),
+                              'object [m] before the result reports it dropped.'),
+            point_place_tolerance=p('point_place_tolerance', PickPlaceConfig.point_place_tolerance,
+                                    'Largest xy distance of an object placed at a point of the table from that '
+                                    'point [m] before the result reports a failure.'),
+            edge_margin=p('edge_margin', PickPlaceConfig.edge_margin, 'Room kept between a placed object\'s '
+                          'footprint and the table\'s edges [m]; a target that leaves less is refused '
+                          '(OUTSIDE_WORKSPACE).'),
             joint_limits=UR5E_LIMITS.scaled(scale, acceleration_scale),
             cartesian_limits=CartesianLimits(
                 speed=p('cartesian_speed', 0.25, 'Tool speed on straight descents and lifts [m/s].'),
@@ -105,8 +116,9 @@ class PickPlaceNode(Node):
         self._motion_timeout_margin = p('motion_timeout_margin', 30.0, 'Wall time allowed beyond a motion\'s '
                                         'planned duration before TIMEOUT [s].')
         self._gripper_timeout = p('gripper_timeout', 15.0, 'Longest wait for a gripper command [s].')
-        self._view_timeout = p('view_timeout', 3.0, 'With clear_view: longest wait for perception to answer from an '
-                               'observation made after the tool cleared the camera\'s view [s].')
+        self._view_timeout = p('view_timeout', 3.0, 'Longest wait after the retreat for perception to answer from an '
+                               'observation made after it (with clear_view: after the tool cleared the camera\'s '
+                               'view) [s].')
 
         callbacks = ReentrantCallbackGroup()
         self._joint_lock = threading.Lock()
@@ -298,7 +310,8 @@ class PickPlaceNode(Node):
                     self._move(plan, step, goal_handle)
                 else:
                     self._grip(step, goal_handle, observation)
-            if stage.name == StageName.RETREAT and self.config.clear_view_from is not None:
+            if stage.name == StageName.RETREAT:
+                # The outcome is judged on what perception sees after the retreat, not on what it last saw.
                 self._wait_for_fresh_view(plan.object.name, goal_handle)
             self._check(plan, stage, goal_handle, observation)
             done = stage.progress
@@ -324,14 +337,18 @@ class PickPlaceNode(Node):
         if step.stop_on_contact and code in (TRAJECTORY_PATH_TOLERANCE_VIOLATED, TRAJECTORY_GOAL_TOLERANCE_VIOLATED):
             # Touched down before the planned height (on the way, or in the last millimetres, where the arm ends
             # a few milliradians short of its goal): placing ends here.
+            self.get_logger().debug(f'touched down: {response.result.error_string}')
             return
         raise _Failed(PickPlaceErrorCode.UNKNOWN, f'the arm did not complete its motion: '
                       f'{response.result.error_string or f"error code {code}"}')
 
     def _wait_for_fresh_view(self, name: str, goal_handle) -> None:
-        """Wait until perception answers from an observation made after the tool cleared the camera's view.
+        """Wait until perception answers from an observation made after the retreat (and so after the tool cleared
+        the camera's view, with clear_view).
 
-        Otherwise the check below, and the next command, would see the placed object where the camera last saw it.
+        Otherwise the check below, and the next command, would see the placed object where perception last saw it
+        (a camera: before the tool moved out of its view; the simulator's objects: up to a publishing period ago).
+        A source without time stamps (stamp 0, e.g. a stub) is not waited for.
         """
         with self._joint_lock:
             msg = self._joint_state
@@ -343,6 +360,8 @@ class PickPlaceNode(Node):
             response = self._object_state(name, goal_handle)
             if not response.success:
                 return  # perception no longer knows it: the check below says so
+            if conv.seconds(response.stamp) == 0.0:
+                return
             if conv.seconds(response.stamp) >= cleared_at:
                 if not response.state.visible:
                     self.get_logger().warning(f'the {name} is out of the camera\'s sight after placing; its '

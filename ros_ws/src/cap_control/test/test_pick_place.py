@@ -9,8 +9,8 @@ from cap_interfaces.action import PickPlace
 from cap_control.kinematics import HOME_JOINTS, forward_kinematics, inverse_kinematics, top_down_pose
 from cap_control.pick_place import (
     GripperStep, LiftCheck, ObjectInfo, Observation, PickPlaceConfig, PickPlaceError,
-    PickPlaceErrorCode, PlacedCheck, StageName, TrajectoryStep, Workspace, plan_pick_place,
-    yaw_of_quaternion,
+    PickPlaceErrorCode, PlacedCheck, StageName, TrajectoryStep, Workspace, allowed_target_range,
+    check_place_on_table, plan_pick_place, target_taken_by, yaw_of_quaternion,
 )
 from cap_control.trajectory import UR5E_LIMITS, trajectory_tcp_positions
 
@@ -133,7 +133,7 @@ def test_the_fingers_close_across_the_side_with_room_when_a_neighbour_stands_clo
     assert abs(float(grasp_pose[:2, 1] @ towards)) < 0.75
 
 
-@pytest.mark.parametrize('spot', [(0.0, -0.5), (-0.28, -0.78), (0.28, -0.22), (0.25, -0.5)])
+@pytest.mark.parametrize('spot', [(0.0, -0.5), (-0.27, -0.77), (0.27, -0.23), (0.25, -0.5)])
 def test_with_a_camera_to_clear_the_tool_ends_out_of_its_line_of_sight_to_the_placed_block(spot):
     camera = (0.0, -0.5, 0.85)
     red = block('red block', 0.15, -0.45)
@@ -189,6 +189,69 @@ def test_objects_and_targets_outside_the_workspace_are_refused(obj, target, word
     with pytest.raises(PickPlaceError, match=re.escape(words)) as raised:
         plan_pick_place(obj, target, HOME_JOINTS)
     assert raised.value.code == PickPlaceErrorCode.OUTSIDE_WORKSPACE
+
+
+def test_the_allowed_range_keeps_the_whole_block_on_the_table_with_a_margin():
+    config = PickPlaceConfig()  # table x in [-0.3, 0.3], y in [-0.8, -0.2]; 1 cm margin
+    (x_low, x_high), (y_low, y_high) = allowed_target_range(block('cyan block', 0.0, -0.5), config)
+    assert (x_low, x_high, y_low, y_high) == pytest.approx((-0.27, 0.27, -0.77, -0.23))
+    # Turned by 45 degrees, a 4 cm cube reaches 2.83 cm out along x and y.
+    (x_low, _), (_, y_high) = allowed_target_range(block('cyan block', 0.0, -0.5, yaw=math.pi / 4), config)
+    assert x_low == pytest.approx(-0.3 + 0.02 * math.sqrt(2) + 0.01)
+    assert y_high == pytest.approx(-0.2 - 0.02 * math.sqrt(2) - 0.01)
+    wider = PickPlaceConfig(edge_margin=0.02)
+    assert allowed_target_range(block('cyan block', 0.0, -0.5), wider)[0] == pytest.approx((-0.26, 0.26))
+
+
+@pytest.mark.parametrize('target', [(-0.3, -0.2), (0.3, -0.8), (0.275, -0.5), (0.0, -0.225), (0.0, -0.95)])
+def test_a_target_that_would_leave_the_block_overhanging_is_refused_with_the_allowed_range(target):
+    with pytest.raises(PickPlaceError) as raised:
+        plan_pick_place(block('cyan block', 0.0, -0.5), target, HOME_JOINTS)
+    assert raised.value.code == PickPlaceErrorCode.OUTSIDE_WORKSPACE
+    message = raised.value.message
+    assert f'({target[0]:.3f}, {target[1]:.3f})' in message
+    assert 'x in [-0.270, 0.270], y in [-0.770, -0.230]' in message
+    assert 'wholly on the table' in message
+
+
+@pytest.mark.parametrize('xy', [(-0.27, -0.23), (0.27, -0.77), (0.0, -0.5)])
+def test_targets_just_inside_the_allowed_range_are_accepted(xy):
+    check_place_on_table(block('cyan block', 0.0, -0.5), xy, PickPlaceConfig())
+
+
+def test_stacking_onto_a_block_that_overhangs_the_edge_is_refused():
+    near_edge = block('green block', 0.285, -0.5)  # 5 mm of it beyond the table's right edge
+    with pytest.raises(PickPlaceError, match='the green block at \\(0.285, -0.500\\) is too close') as raised:
+        plan_pick_place(block('red block', 0.0, -0.5), near_edge, HOME_JOINTS)
+    assert raised.value.code == PickPlaceErrorCode.OUTSIDE_WORKSPACE
+
+
+def test_a_point_target_on_another_block_is_refused_naming_it_and_one_in_a_bowl_is_not():
+    red, orange = block('red block', 0.0, -0.4), block('orange block', 0.0, -0.55)
+    config = PickPlaceConfig()
+    assert target_taken_by(red, (0.0, -0.52), [orange], config) is orange
+    assert target_taken_by(red, (0.0, -0.5), [orange], config) is None  # 5 cm apart: 1 cm between them
+    with pytest.raises(PickPlaceError, match='the orange block at \\(0.000, -0.550\\) is in the way') as raised:
+        plan_pick_place(red, (0.0, -0.52), HOME_JOINTS, neighbours=[orange])
+    assert raised.value.code == PickPlaceErrorCode.OUTSIDE_WORKSPACE
+    assert 'put it on the orange block by name' in raised.value.message
+    blue = bowl('blue bowl', 0.1, -0.6)
+    assert target_taken_by(red, (0.11, -0.6), [blue, orange], config) is None  # into the bowl
+
+
+def test_after_placing_at_a_point_the_block_must_rest_on_the_table_there():
+    plan = plan_pick_place(block('red block', 0.0, -0.5), (0.1, -0.3), HOME_JOINTS)
+    (placed,) = stage(plan, StageName.RETREAT).checks
+    assert placed.failure(Observation(object_position=(0.1, -0.3, 0.02))) is None
+    assert 'fell off the table' in placed.failure(Observation(object_position=(0.12, -0.25, -0.73)))
+    assert 'fell off the table' in placed.failure(Observation(object_position=(0.1, -0.18, 0.02)))
+    assert 'on top of something' in placed.failure(Observation(object_position=(0.1, -0.3, 0.06)))
+    assert 'from the target' in placed.failure(Observation(object_position=(0.1, -0.335, 0.02)))
+    # On a block, the object rests on top of it.
+    stacked = plan_pick_place(block('red block', 0.0, -0.5), block('blue block', 0.1, -0.3), HOME_JOINTS)
+    (on_block,) = stage(stacked, StageName.RETREAT).checks
+    assert on_block.failure(Observation(object_position=(0.1, -0.3, 0.06))) is None
+    assert 'fell off the table' in on_block.failure(Observation(object_position=(0.1, -0.3, -0.7)))
 
 
 def test_a_narrower_workspace_is_enforced_whatever_the_target():

@@ -184,3 +184,18 @@ def test_after_clearing_the_cameras_view_near_the_base_the_next_pick_still_succe
         code, message, _ = execute(world, plan)
         assert code == PickPlaceErrorCode.NONE, f'{name}: {message}'
         assert math.dist(world.object_state(name).position[:2], target) < 0.02
+
+
+@pytest.mark.parametrize('corner', [(-0.3, -0.2), (0.3, -0.8)])
+def test_a_block_set_down_over_the_edge_falls_and_is_reported_so(world, corner):
+    # A margin below zero lets through the targets that the planner refuses by default: the check after the
+    # place, not the refusal, is judged here.
+    from cap_control.pick_place import PickPlaceConfig
+
+    config = PickPlaceConfig(edge_margin=-0.05)
+    plan = plan_pick_place(object_info(world, 'yellow block'), corner, world.joint_positions(), config)
+    code, message, stages = execute(world, plan)
+    assert world.object_state('yellow block').position[2] < -0.1, 'it fell to the floor'
+    assert code == PickPlaceErrorCode.OBJECT_DROPPED
+    assert 'the yellow block fell off the table' in message
+    assert stages[-1] == StageName.RETREAT.value
