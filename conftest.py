@@ -23,6 +23,13 @@ def next_domain_id() -> int:
     return _FIRST_DOMAIN + next(_domain_ids) % _DOMAIN_COUNT
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    # Tests bring up graphs in this process: keep its threads on one CPU, as Graph does (cap_llm/cpu_affinity.py).
+    from cap_llm.cpu_affinity import pin_to_one_cpu
+
+    pin_to_one_cpu(0)
+
+
 @pytest.fixture(autouse=True)
 def ros_isolation(monkeypatch: pytest.MonkeyPatch) -> str:
     """Give this test localhost-only discovery and its own ROS_DOMAIN_ID (inherited by any process it starts)."""

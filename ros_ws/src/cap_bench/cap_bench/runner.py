@@ -116,7 +116,7 @@ def _wait(predicate, timeout: float) -> bool:
 class _EpisodeRunner:
     """One graph (in this process) running episodes one after another."""
 
-    def __init__(self, options: BenchOptions, cassette: pathlib.Path | None) -> None:
+    def __init__(self, options: BenchOptions, cassette: pathlib.Path | None, cpu: int = 0) -> None:
         import rclpy
         from rclpy.action import ActionClient
         from rclpy.context import Context
@@ -140,7 +140,7 @@ class _EpisodeRunner:
         self.graph = Graph(self.context, GraphOptions(
             perception=options.perception, llm_backend='cassette' if options.policy == 'oracle' else 'http',
             cassette=str(cassette) if cassette else '', camera_rate=10.0 if options.perception == 'rgbd' else 0.0,
-            extra={'lmp_node': lmp, 'sim_bridge': {'cameras': ['top']}}))
+            extra={'lmp_node': lmp, 'sim_bridge': {'cameras': ['top']}}, cpu=cpu))
         self.node = rclpy.create_node('cap_bench', context=self.context)
         self.graph.executor.add_node(self.node)
         self.execute = ActionClient(self.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
@@ -241,7 +241,8 @@ def _worker(index: int, keys: list[str], options: BenchOptions, cassette: str | 
     # Each worker is a graph of its own: keep it on a DDS domain of its own.
     os.environ['ROS_DOMAIN_ID'] = str(options.first_domain_id + index)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    runner = _EpisodeRunner(options, pathlib.Path(cassette) if cassette else None)
+    # Job i on CPU i: each job's threads share one interpreter lock (see cap_llm.cpu_affinity).
+    runner = _EpisodeRunner(options, pathlib.Path(cassette) if cassette else None, cpu=index)
     try:
         with open(results, 'a', encoding='utf-8') as out:
             for key in keys:

@@ -29,6 +29,7 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
 
+from cap_llm.cpu_affinity import pin_to_one_cpu
 from cap_llm.thread_watch import ThreadWatch
 
 # (node name, package, its config file, module, class), in start order: the simulator first, lmp_node last.
@@ -62,6 +63,7 @@ class GraphOptions:
     record_cassette: bool = False
     camera_rate: float = 10.0  # [Hz of simulated time]; 0 = no images
     extra: dict[str, dict[str, Any]] = field(default_factory=dict)  # node name -> {parameter: value}
+    cpu: int | None = 0  # the process is pinned to this one of its allowed CPUs (cpu_affinity.py); None: not pinned
 
     def overrides(self) -> dict[str, dict[str, Any]]:
         lmp = {'llm_backend': self.llm_backend, 'record_cassette': self.record_cassette}
@@ -211,6 +213,8 @@ class Graph:
     def __init__(self, context, options: GraphOptions, num_threads: int = 8) -> None:
         import importlib
 
+        if options.cpu is not None:
+            pin_to_one_cpu(options.cpu)  # before the graph's threads start, so that they inherit it
         self.context = context
         self.nodes: dict[str, Any] = {}
         self._closed = False
