@@ -297,7 +297,10 @@ class LmpNode(Node):
                 result.message = f'{job.stop_reason} ({result.message})'
         else:
             stage, outcome = StatusEvent.STAGE_ERROR, 'error'
-        self._publish_status(job, stage, code=result.code, message=result.message or outcome)
+        # The final status says what the command cost, model time first: it has a deadline of its own.
+        cost = (f"model {result.timings.get('model_s', 0.0):.2f} s in {result.model_calls} call(s), "
+                f"total {result.timings.get('total_s', 0.0):.2f} s")
+        self._publish_status(job, stage, code=result.code, message=f'{result.message or outcome} ({cost})')
         return outcome
 
     def _on_engine_event(self, event: engine_module.EngineEvent) -> None:

@@ -124,6 +124,7 @@ def test_a_topic_command_runs_and_reports_every_stage(graph):
     assert graph.stages(command_id) == [StatusEvent.STAGE_RECEIVED, StatusEvent.STAGE_GENERATING,
                                         StatusEvent.STAGE_CODE, StatusEvent.STAGE_EXECUTING, StatusEvent.STAGE_DONE]
     assert graph.code == [PROGRAMS['which blocks are there']]
+    assert ' s in 1 call(s), total ' in graph.final(command_id).message  # model time and calls are reported
 
 
 def test_unknown_object_is_an_error_naming_it_and_the_next_command_works(graph):
