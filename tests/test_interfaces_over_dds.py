@@ -25,7 +25,7 @@ def test_every_test_is_isolated_on_localhost(ros_isolation):
 def test_command_published_on_cap_command_is_received(ros_context, spin_until):
     sender = Node('command_sender', context=ros_context)
     receiver = Node('command_receiver', context=ros_context)
-    executor = MultiThreadedExecutor(context=ros_context)
+    executor = MultiThreadedExecutor(num_threads=4, context=ros_context)
     executor.add_node(sender)
     executor.add_node(receiver)
     received: list[str] = []

@@ -242,7 +242,7 @@ def test_installed_entry_point_runs_as_fast_as_possible_with_the_packaged_parame
                                 '-p', 'camera_rate:=0.0', '-p', 'seed:=4', '-p', 'real_time:=false'],
                                env=dict(os.environ), stdout=log, stderr=subprocess.STDOUT)
     node = Node('entry_point_probe', context=ros_context)
-    executor = MultiThreadedExecutor(context=ros_context)
+    executor = MultiThreadedExecutor(num_threads=4, context=ros_context)
     executor.add_node(node)
     received = []
     node.create_subscription(ObjectArray, GraphNames.SIM_OBJECTS_TOPIC, received.append, LATCHED)

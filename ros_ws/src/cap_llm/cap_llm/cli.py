@@ -150,6 +150,7 @@ def send(command: str, server_timeout: float, timeout: float, out=None) -> int:
                    for name in dir(StatusEvent) if name.startswith('STAGE_')}
     last_stage: list[int] = []
     goal_handle = None
+    goal_future = None
 
     def on_feedback(message) -> None:
         status = message.feedback.status
@@ -171,9 +172,15 @@ def send(command: str, server_timeout: float, timeout: float, out=None) -> int:
 
     def cancel() -> bool:
         """Ask lmp_node to cancel the goal; True when it answered within the grace."""
-        if goal_handle is None:
+        handle = goal_handle
+        if handle is None and goal_future is not None:
+            # Sent, but its acceptance is not here yet (a signal in between): the program may already run, so
+            # wait for the handle within the grace and cancel it then.
+            if session.spin_until(goal_future.done, CANCEL_GRACE_S, interruptible=False):
+                handle = goal_future.result()
+        if handle is None or not handle.accepted:
             return False
-        future = goal_handle.cancel_goal_async()
+        future = handle.cancel_goal_async()
         return session.spin_until(future.done, CANCEL_GRACE_S, interruptible=False)
 
     try:
@@ -210,7 +217,7 @@ def send(command: str, server_timeout: float, timeout: float, out=None) -> int:
                  out)
         return EXIT_OK if result.success else EXIT_FAILED
     except Interrupted as interrupted:
-        if goal_handle is not None and goal_handle.accepted:
+        if goal_future is not None:
             _error(f'interrupted ({interrupted}): ' + ('the command was cancelled' if cancel() else
                                                        'lmp_node did not answer the cancel'))
         else:

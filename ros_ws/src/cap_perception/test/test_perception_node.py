@@ -14,7 +14,7 @@ from cap_perception.ros_conversions import to_msg
 @pytest.fixture
 def graph(ros_context):
     nodes = []
-    executor = MultiThreadedExecutor(context=ros_context)
+    executor = MultiThreadedExecutor(num_threads=4, context=ros_context)
 
     def add(node):
         nodes.append(node)
