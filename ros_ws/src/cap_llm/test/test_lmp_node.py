@@ -1,22 +1,16 @@
 """lmp_node over DDS with the real perception node (stub source) and a replay cassette: statuses, code, say,
 errors a person understands, refusal of unsafe code, cancel, /cap/stop and sessions."""
-import threading
-import time
 
 import pytest
 import yaml
 from action_msgs.msg import GoalStatus
-from rclpy.action import ActionClient
-from rclpy.executors import MultiThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Empty, String
 from std_srvs.srv import Trigger
 
 from cap_interfaces.action import ExecuteCommand
-from cap_interfaces.msg import GraphNames, StatusEvent
-from cap_llm.lmp_node import COMMAND_QOS, EVENT_QOS, LmpNode
-from cap_perception.perception_node import PerceptionNode
+from cap_interfaces.msg import StatusEvent
+from cap_llm.testing.lmp_graph import TWO_BLOCKS, LmpGraph, wait_for
 
 PROGRAMS = {
     'which blocks are there': "say('I see ' + ', '.join(n for n in get_obj_names() if n.endswith('block')))",
@@ -38,79 +32,16 @@ def _write_cassette(path):
     path.write_text(yaml.safe_dump({'format': 'cap-llm-cassette/1', 'entries': entries}))
 
 
-def wait_for(predicate, timeout=15.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
-
-
-class Graph:
-    """lmp_node + perception_node (stub objects) + a user node, spun by an executor in a background thread."""
-
-    def __init__(self, context, tmp_path):
-        stub = tmp_path / 'objects.yaml'
-        stub.write_text('objects:\n'
-                        '  - {color: red, category: block, position: [0.1, -0.5, 0.02]}\n'
-                        '  - {color: blue, category: block, position: [-0.1, -0.6, 0.02]}\n'
-                        '  - {color: green, category: bowl, position: [0.0, -0.4, 0.03], size: [0.13, 0.13, 0.04]}\n')
-        cassette = tmp_path / 'cassette.yaml'
-        _write_cassette(cassette)
-        self.perception = PerceptionNode(context=context, parameter_overrides=[
-            Parameter('source', value='stub'), Parameter('stub_file', value=str(stub))])
-        self.lmp = LmpNode(context=context, parameter_overrides=[
-            Parameter('cassette', value=str(cassette)), Parameter('time_limit_s', value=60.0),
-            Parameter('stall_limit_s', value=3.0)])
-        self.user = Node('user', context=context)
-        self.statuses, self.said, self.code = [], [], []
-        self.user.create_subscription(StatusEvent, GraphNames.STATUS_TOPIC, self.statuses.append, EVENT_QOS)
-        self.user.create_subscription(String, GraphNames.SAY_TOPIC, lambda m: self.said.append(m.data), EVENT_QOS)
-        self.user.create_subscription(String, GraphNames.CODE_TOPIC, lambda m: self.code.append(m.data), EVENT_QOS)
-        self.commands = self.user.create_publisher(String, GraphNames.COMMAND_TOPIC, COMMAND_QOS)
-        self.stop = self.user.create_publisher(Empty, GraphNames.STOP_TOPIC, COMMAND_QOS)
-        self.execute = ActionClient(self.user, ExecuteCommand, GraphNames.EXECUTE_ACTION)
-        self.reset = self.user.create_client(Trigger, GraphNames.RESET_SESSION_SERVICE)
-        self.executor = MultiThreadedExecutor(num_threads=6, context=context)
-        for node in (self.perception, self.lmp, self.user):
-            self.executor.add_node(node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
-        assert wait_for(lambda: self.commands.get_subscription_count() == 1 and self.execute.server_is_ready())
-
-    def stages(self, command_id):
-        return [s.stage for s in list(self.statuses) if s.command_id == command_id]
-
-    def final(self, command_id):
-        for status in reversed(list(self.statuses)):
-            if status.command_id == command_id and status.stage >= StatusEvent.STAGE_DONE:
-                return status
-        return None
-
-    def run(self, command, timeout=20.0):
-        """Send through /cap/execute; return the wrapped result (status, result)."""
-        done = threading.Event()
-        box = {}
-
-        def on_goal(future):
-            box['handle'] = future.result()
-            box['handle'].get_result_async().add_done_callback(lambda f: (box.update(result=f.result()),
-                                                                           done.set()))
-        self.execute.send_goal_async(ExecuteCommand.Goal(command=command)).add_done_callback(on_goal)
-        assert done.wait(timeout), f'no result for {command!r}'
-        return box['result']
-
-    def close(self):
-        self.executor.shutdown()
-        self.thread.join(5)
-        for node in (self.perception, self.lmp, self.user):
-            node.destroy_node()
+STUB_OBJECTS = TWO_BLOCKS + '  - {color: green, category: bowl, position: [0.0, -0.4, 0.03], size: [0.13, 0.13, 0.04]}\n'
 
 
 @pytest.fixture
 def graph(ros_context, tmp_path):
-    graph = Graph(ros_context, tmp_path)
+    cassette = tmp_path / 'cassette.yaml'
+    _write_cassette(cassette)
+    graph = LmpGraph(ros_context, tmp_path, [Parameter('cassette', value=str(cassette)),
+                                             Parameter('time_limit_s', value=60.0),
+                                             Parameter('stall_limit_s', value=3.0)], STUB_OBJECTS)
     yield graph
     graph.close()
 

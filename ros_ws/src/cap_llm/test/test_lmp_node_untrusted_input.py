@@ -5,25 +5,17 @@ changed at run time either takes effect or is refused with the reason.
 One graph serves every test of the module (bringing one up costs seconds); each test leaves it idle.
 """
 import os
-import threading
-import time
 
 import pytest
 import rclpy
-from rclpy.action import ActionClient
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
-from rclpy.node import Node
-from rclpy.parameter import Parameter, parameter_value_to_python
-from rclpy.parameter_client import AsyncParameterClient
+from rclpy.parameter import Parameter
 from std_msgs.msg import Empty, String
 
-from cap_interfaces.action import ExecuteCommand
-from cap_interfaces.msg import GraphNames, StatusEvent
+from cap_interfaces.msg import StatusEvent
 from cap_llm.command_queue import MAX_COMMAND_CHARS
-from cap_llm.lmp_node import COMMAND_QOS, EVENT_QOS, LmpNode
+from cap_llm.testing.lmp_graph import LmpGraph, wait_for
 from cap_llm.testing.openai_server import ScriptedOpenAIServer, last_query_line
-from cap_perception.perception_node import PerceptionNode
 
 SURROGATE = chr(55296)  # a lone surrogate: a str Python holds but UTF-8 (and so DDS) cannot carry
 # Programs whose text holds a lone surrogate where the node passes it on: an error message, what is said, the code
@@ -52,79 +44,6 @@ def answer(request):
     return None  # the answers table decides
 
 
-def wait_for(predicate, timeout=20.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
-
-
-class Graph:
-    def __init__(self, context, tmp_path, server):
-        stub = tmp_path / 'objects.yaml'
-        stub.write_text('objects:\n'
-                        '  - {color: red, category: block, position: [0.1, -0.5, 0.02]}\n'
-                        '  - {color: blue, category: block, position: [-0.1, -0.6, 0.02]}\n')
-        self.perception = PerceptionNode(context=context, parameter_overrides=[
-            Parameter('source', value='stub'), Parameter('stub_file', value=str(stub))])
-        self.lmp = LmpNode(context=context, parameter_overrides=[
-            Parameter('llm_backend', value='http'), Parameter('base_url', value=server.base_url),
-            Parameter('model', value=server.model), Parameter('time_limit_s', value=60.0),
-            Parameter('stall_limit_s', value=3.0)])
-        self.user = Node('user', context=context)
-        self.statuses, self.said = [], []
-        self.user.create_subscription(StatusEvent, GraphNames.STATUS_TOPIC, self.statuses.append, EVENT_QOS)
-        self.user.create_subscription(String, GraphNames.SAY_TOPIC, lambda m: self.said.append(m.data), EVENT_QOS)
-        self.commands = self.user.create_publisher(String, GraphNames.COMMAND_TOPIC, COMMAND_QOS)
-        self.stop = self.user.create_publisher(Empty, GraphNames.STOP_TOPIC, COMMAND_QOS)
-        self.execute = ActionClient(self.user, ExecuteCommand, GraphNames.EXECUTE_ACTION)
-        self.parameters = AsyncParameterClient(self.user, 'lmp_node')
-        self.executor = MultiThreadedExecutor(num_threads=6, context=context)
-        for node in (self.perception, self.lmp, self.user):
-            self.executor.add_node(node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
-        assert wait_for(lambda: self.commands.get_subscription_count() == 1 and self.execute.server_is_ready()
-                        and self.parameters.services_are_ready())
-
-    def run(self, command, timeout=30.0):
-        """Send through /cap/execute; the wrapped result (status, result)."""
-        done = threading.Event()
-        box = {}
-
-        def on_goal(future):
-            box['handle'] = future.result()
-            box['handle'].get_result_async().add_done_callback(lambda f: (box.update(result=f.result()),
-                                                                           done.set()))
-        self.execute.send_goal_async(ExecuteCommand.Goal(command=command)).add_done_callback(on_goal)
-        assert done.wait(timeout), f'no result for {command!r}'
-        return box['result']
-
-    def final(self, command_id):
-        for status in reversed(list(self.statuses)):
-            if status.command_id == command_id and status.stage >= StatusEvent.STAGE_DONE:
-                return status
-        return None
-
-    def set_parameter(self, name, value):
-        future = self.parameters.set_parameters([Parameter(name, value=value)])
-        assert wait_for(future.done)
-        return future.result().results[0]
-
-    def get_parameter(self, name):
-        future = self.parameters.get_parameters([name])
-        assert wait_for(future.done)
-        return parameter_value_to_python(future.result().values[0])
-
-    def close(self):
-        self.executor.shutdown()
-        self.thread.join(5)
-        for node in (self.perception, self.lmp, self.user):
-            node.destroy_node()
-
-
 @pytest.fixture(scope='module')
 def server():
     with ScriptedOpenAIServer(ANSWERS, responder=answer) as scripted:
@@ -139,7 +58,10 @@ def graph(server, tmp_path_factory):
         patch.setenv('ROS_DOMAIN_ID', str(domain_id))
         context = Context()
         rclpy.init(context=context, domain_id=domain_id)
-        graph = Graph(context, tmp_path_factory.mktemp('lmp'), server)
+        graph = LmpGraph(context, tmp_path_factory.mktemp('lmp'), [
+            Parameter('llm_backend', value='http'), Parameter('base_url', value=server.base_url),
+            Parameter('model', value=server.model), Parameter('time_limit_s', value=60.0),
+            Parameter('stall_limit_s', value=3.0)])
         try:
             yield graph
         finally:
