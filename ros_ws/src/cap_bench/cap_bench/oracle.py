@@ -1,4 +1,4 @@
-"""Reference programs: one per template, written against the robot API seen by generated code (DESIGN.md §5).
+"""Reference programs: one per template, written against the robot API seen by generated code.
 
 Given an episode's attribute values (not its resolved referents), each program finds what the instruction refers to
 through the API at run time, exactly as a model-written program would, and is executed through the same sandboxed

@@ -1,7 +1,8 @@
 """The table-top robot API of generated code, bound to the graph's perception services and pick-place action.
 
 Called from the worker thread that runs a program while an executor spins the node in another thread; requests are
-sent asynchronously and awaited on threading events, never by spinning (see CONVENTIONS.md, rclpy threading).
+sent asynchronously and awaited on threading events, never by spinning (a blocking call on a node that an executor
+already spins would deadlock).
 Every failure raises RobotApiError with a message a person understands. Text a program passes on (what it says,
 object names) is made safe first (safe_text.wire_text): a string rclpy cannot encode would fail the publish.
 """
