@@ -58,12 +58,11 @@ from cap_llm import wire
 from cap_llm.engine import CODE, DONE, ERROR, EXECUTING, GENERATING, CommandResult, EngineEvent, check_program_size
 from cap_llm.errors import CapLLMError, CodeRejected, SandboxProcessLost
 from cap_llm.llm import Completion, CompletionRequest, LLMClient
-from cap_llm.safe_text import wire_text
+from cap_llm.safe_text import MAX_MESSAGE_CHARS, wire_text
 from cap_llm.sandbox import SandboxLimits
 
 _SESSION_LOST = 'the session was lost (earlier variables and generated functions are forgotten) and a new one started'
 _STAGES = (GENERATING, CODE, EXECUTING, DONE, ERROR)
-_MAX_MESSAGE_CHARS = 10_000
 # How long after time_limit_s the process is killed when no result came: room for the watchdog's own stop and the
 # result message (milliseconds), small enough that the time limit holds within a second whatever the program does.
 KILL_MARGIN_S = 0.5
@@ -92,7 +91,7 @@ def _event(message: Mapping[str, Any]) -> EngineEvent:
     if not isinstance(command_id, int) or stage not in _STAGES:
         raise _ProcessLost('protocol')
     return EngineEvent(command_id, stage, _text(message.get('lmp'), 200), _text(message.get('code', ''),
-                       wire.MAX_CODE_CHARS), _text(message.get('message', ''), _MAX_MESSAGE_CHARS))
+                       wire.MAX_CODE_CHARS), _text(message.get('message', ''), MAX_MESSAGE_CHARS))
 
 
 def _count(value: Any) -> int:
