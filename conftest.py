@@ -24,8 +24,8 @@ def next_domain_id() -> int:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    # Tests bring up graphs in this process: keep its threads on one CPU, as Graph does (cap_llm/cpu_affinity.py).
-    from cap_llm.cpu_affinity import pin_to_one_cpu
+    # Tests bring up graphs in this process: keep its threads on one CPU, as Graph does (cap_bringup/cpu_affinity.py).
+    from cap_bringup.cpu_affinity import pin_to_one_cpu
 
     pin_to_one_cpu(0)
 

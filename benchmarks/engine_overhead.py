@@ -22,11 +22,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from cap_llm.cassette import HAND_WRITTEN, Cassette, CassetteClient, CassetteEntry
-from cap_llm.prompts import load_prompt
-from cap_llm.sandbox import SandboxLimits
-from cap_llm.tabletop import build_tabletop_engine
-from cap_llm.testing.table import Table
+from cap_lmp.cassette import HAND_WRITTEN, Cassette, CassetteClient, CassetteEntry
+from cap_lmp.prompts import load_prompt
+from cap_lmp_ros.domains.tabletop.lmps import PROMPTS_DIR
+from cap_lmp.sandbox import SandboxLimits
+from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
+from cap_lmp_ros.testing.table import Table
 
 SCENE = {'blue block': (-0.15, -0.35), 'red block': (0.0, -0.4), 'green block': (0.15, -0.45),
          'yellow block': (-0.1, -0.55), 'blue bowl': (0.05, -0.65), 'red bowl': (-0.2, -0.7),
@@ -63,8 +64,8 @@ def percentile(values: list[float], q: float) -> float:
 
 def stop_overshoot_ms(runs: int = 5, limit_s: float = 0.2) -> float:
     """How long after the time limit an infinite loop is stopped (median over runs)."""
-    from cap_llm.errors import ExecutionStopped
-    from cap_llm.sandbox import Sandbox
+    from cap_lmp.errors import ExecutionStopped
+    from cap_lmp.sandbox import Sandbox
 
     sandbox = Sandbox(SandboxLimits(time_limit_s=limit_s))
     program = sandbox.compile('while True:\n    pass')
@@ -85,7 +86,7 @@ def summary(values: list[float]) -> dict[str, float]:
 
 def isolated_overhead_ms(path: Path, n: int, warmup: int) -> dict:
     """Overhead per command through IsolatedEngine: wall time of run() minus the model time the sandbox reports."""
-    from cap_llm.isolated_engine import IsolatedEngine
+    from cap_lmp.isolated_engine import IsolatedEngine
 
     current = {'table': Table.with_objects(SCENE)}
 
@@ -140,7 +141,7 @@ def main() -> None:
         moved = all(abs(table.get_obj_pos(f'{c} block') - table.get_obj_pos(f'{c} bowl')).max() < 1e-9
                     for c in ('blue', 'red', 'green', 'yellow'))
         isolated = isolated_overhead_ms(path, args.n, args.warmup)
-    prompt = load_prompt('tabletop_ui')
+    prompt = load_prompt(PROMPTS_DIR, 'tabletop_ui')
     print(json.dumps({
         'benchmark': 'engine_overhead',
         'measured': ('wall time of Engine.run for one table-top command minus the time inside the LLM client: '

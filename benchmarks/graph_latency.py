@@ -36,8 +36,8 @@ from std_msgs.msg import String  # noqa: E402
 from cap_interfaces.action import ExecuteCommand, PickPlace  # noqa: E402
 from cap_interfaces.msg import GraphNames  # noqa: E402
 from cap_interfaces.srv import GetObjectState  # noqa: E402
-from cap_llm.graph import Graph, GraphOptions  # noqa: E402
-from cap_llm.lmp_node import COMMAND_QOS  # noqa: E402
+from cap_bringup.graph import Graph, GraphOptions  # noqa: E402
+from cap_lmp_ros.lmp_node import COMMAND_QOS  # noqa: E402
 
 OBJECTS = 'red block, blue block, green block, red bowl, blue bowl, green bowl'
 PROGRAMS = {

@@ -1,6 +1,6 @@
 """How far past its limits an attack program gets. Prints one JSON object.
 
-Every attack of the limit tests (cap_llm/testing/attack_programs.py: programs that loop, disable tracing, sit
+Every attack of the limit tests (cap_lmp/testing/attack_programs.py: programs that loop, disable tracing, sit
 in one C call or in GEOS, call the robot forever, or ask a slow model in a loop) runs once through IsolatedEngine,
 as lmp_node runs it: a real sandbox process, the model a real HTTP server on 127.0.0.1, the robot the in-memory
 table. For each: how long the command took, its overshoot past the limit that applies (time_limit_s, or for the
@@ -16,12 +16,12 @@ import time
 
 import numpy as np
 
-from cap_llm.isolated_engine import KILL_MARGIN_S, IsolatedEngine
-from cap_llm.llm import OpenAICompatibleClient
-from cap_llm.sandbox import SandboxLimits
-from cap_llm.testing.attack_programs import MOVE, PROGRAMS, SCENE, TIME_ATTACKS
-from cap_llm.testing.openai_server import ScriptedOpenAIServer, ScriptedReply
-from cap_llm.testing.table import Table
+from cap_lmp.isolated_engine import KILL_MARGIN_S, IsolatedEngine
+from cap_lmp.llm import OpenAICompatibleClient
+from cap_lmp.sandbox import SandboxLimits
+from cap_lmp.testing.attack_programs import MOVE, PROGRAMS, SCENE, TIME_ATTACKS
+from cap_lmp.testing.openai_server import ScriptedOpenAIServer, ScriptedReply
+from cap_lmp_ros.testing.table import Table
 
 MODEL_LIMIT_S = 2.0
 

@@ -35,7 +35,7 @@ from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
-from cap_llm.cpu_affinity import pin_to_one_cpu  # noqa: E402
+from cap_bringup.cpu_affinity import pin_to_one_cpu  # noqa: E402
 from cap_control.pick_place import ObjectInfo, allowed_target_range, yaw_of_quaternion  # noqa: E402
 from cap_control.pick_place_node import PickPlaceNode  # noqa: E402
 from cap_interfaces.action import PickPlace  # noqa: E402
@@ -101,7 +101,7 @@ def main() -> None:
                         help='what perception reports positions from, as `cap up --perception` [ground_truth]')
     args = parser.parse_args()
 
-    pin_to_one_cpu(0)  # as the graph does (cap_llm/cpu_affinity.py)
+    pin_to_one_cpu(0)  # as the graph does (cap_bringup/cpu_affinity.py)
     context = Context()
     rclpy.init(context=context)
     bridge = SimBridgeNode(context=context, parameter_overrides=[

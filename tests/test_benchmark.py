@@ -7,7 +7,7 @@ import pytest
 from cap_bench.episodes import sample_episode
 from cap_bench.oracle import oracle_program
 from cap_bench.runner import BenchOptions, load_records, run_benchmark
-from cap_llm.testing.openai_server import ScriptedOpenAIServer, last_query_line
+from cap_lmp.testing.openai_server import ScriptedOpenAIServer, last_query_line
 
 
 @pytest.mark.slow

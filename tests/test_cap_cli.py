@@ -10,18 +10,18 @@ import time
 
 import pytest
 
-from cap_llm.testing.cli_scenes import CONTROL_CHARACTERS, ENDLESS, write_cli_cassette
-from cap_llm.thread_watch import FATAL_EXIT_CODE
+from cap_bringup.testing.cli_scenes import CONTROL_CHARACTERS, ENDLESS, write_cli_cassette
+from cap_lmp_ros.thread_watch import FATAL_EXIT_CODE
 
 
 def _cap(*args, timeout=120):
-    return subprocess.run([sys.executable, '-m', 'cap_llm.cli', *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, '-m', 'cap_bringup.cli', *args], capture_output=True, text=True,
                           timeout=timeout, env=os.environ.copy())
 
 
 @pytest.mark.slow
 def test_up_send_snapshot_stop_and_ctrl_c(ros_isolation, tmp_path):
-    graph = subprocess.Popen([sys.executable, '-m', 'cap_llm.cli', 'up', '--seed', '2',
+    graph = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'up', '--seed', '2',
                               '--objects', 'red block, blue block, green bowl'],
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=os.environ.copy())
     try:
@@ -75,9 +75,9 @@ def _wait_for_line(lines: queue.Queue, seen: list, text: str, timeout: float) ->
 
 @pytest.fixture
 def cli_graph(ros_isolation, tmp_path):
-    """`cap up` with the command-line test programs (cap_llm.testing.cli_scenes), stopped with Ctrl-C at the end."""
+    """`cap up` with the command-line test programs (cap_bringup.testing.cli_scenes), stopped with Ctrl-C at the end."""
     cassette = write_cli_cassette(tmp_path / 'cli.yaml')
-    graph = subprocess.Popen([sys.executable, '-m', 'cap_llm.cli', 'up', '--cassette', str(cassette)],
+    graph = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'up', '--cassette', str(cassette)],
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=os.environ.copy())
     try:
         yield graph
@@ -98,7 +98,7 @@ def test_send_holds_its_timeout_ends_on_sigterm_and_prints_no_control_characters
     assert took < 8 + 2 + 15, took  # the timeout, the cancel's grace, and a generous start of the process
 
     # SIGTERM ends a `cap send` that follows an endless program within a few seconds, and cancels the program.
-    follow = subprocess.Popen([sys.executable, '-m', 'cap_llm.cli', 'send', ENDLESS, '--wait', '60'],
+    follow = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'send', ENDLESS, '--wait', '60'],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=os.environ.copy())
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=_lines, args=(follow.stdout, lines), daemon=True).start()
@@ -126,7 +126,7 @@ def test_send_holds_its_timeout_ends_on_sigterm_and_prints_no_control_characters
 
 def test_up_without_a_model_says_what_to_set_in_one_line(ros_isolation):
     env = {k: v for k, v in os.environ.items() if not k.startswith('CAP_LLM_')}
-    result = subprocess.run([sys.executable, '-m', 'cap_llm.cli', 'up', '--backend', 'http'], capture_output=True,
+    result = subprocess.run([sys.executable, '-m', 'cap_bringup.cli', 'up', '--backend', 'http'], capture_output=True,
                             text=True, timeout=120, env=env)
     output = result.stdout + result.stderr
     assert result.returncode == 2, output
@@ -146,7 +146,7 @@ def test_bench_help_usage_and_domain_ids(ros_isolation, tmp_path):
     empty = _cap('bench', 'tabletop', '--trials', '0', '--out', str(tmp_path))
     assert empty.returncode == 0, empty.stderr
     assert json.loads((tmp_path / 'options.json').read_text())['first_domain_id'] == int(ros_isolation)
-    crowded = subprocess.run([sys.executable, '-m', 'cap_llm.cli', 'bench', 'tabletop', '--jobs', '4'],
+    crowded = subprocess.run([sys.executable, '-m', 'cap_bringup.cli', 'bench', 'tabletop', '--jobs', '4'],
                              capture_output=True, text=True, timeout=60, env={**os.environ, 'ROS_DOMAIN_ID': '231'})
     assert crowded.returncode == 2
     assert 'error: 4 job(s) need ROS_DOMAIN_IDs 231..234' in crowded.stderr
@@ -156,7 +156,7 @@ def test_bench_help_usage_and_domain_ids(ros_isolation, tmp_path):
 _FAULTY_CALLBACK = '''
 import sys
 import rclpy
-from cap_llm import cli, graph
+from cap_bringup import cli, graph
 
 built = graph.Graph.__init__
 

@@ -9,10 +9,10 @@ from std_msgs.msg import Empty
 
 from cap_interfaces.action import ExecuteCommand
 from cap_interfaces.msg import GraphNames
-from cap_llm.demo import STEPS, run_demo
-from cap_llm.graph import Graph, GraphOptions
-from cap_llm.lmp_node import COMMAND_QOS
-from cap_llm.testing.openai_server import ScriptedOpenAIServer
+from cap_bringup.demo import STEPS, run_demo
+from cap_bringup.graph import Graph, GraphOptions
+from cap_lmp_ros.lmp_node import COMMAND_QOS
+from cap_lmp.testing.openai_server import ScriptedOpenAIServer
 
 
 def _wait(predicate, timeout=60.0):

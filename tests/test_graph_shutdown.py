@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from cap_llm.testing.cli_scenes import ENDLESS, HELLO, write_cli_cassette
+from cap_bringup.testing.cli_scenes import ENDLESS, HELLO, write_cli_cassette
 
 # Builds the graph and runs one command through /cap/execute; then the script ends: by returning from a
 # `with Graph(...)` block, by just returning (no close(), no reference kept), or by SIGTERM while a program runs.
@@ -19,7 +19,7 @@ from rclpy.action import ActionClient
 from rclpy.context import Context
 from cap_interfaces.action import ExecuteCommand
 from cap_interfaces.msg import GraphNames
-from cap_llm.graph import Graph, GraphOptions
+from cap_bringup.graph import Graph, GraphOptions
 
 cassette, command, ending = sys.argv[1:]
 context = Context()

@@ -22,5 +22,9 @@ setup(
     entry_points={
         'console_scripts': [
         ],
+        # `cap bench tabletop` (cap_bringup's command line finds benchmarks through this group).
+        'cap_ros.benchmarks': [
+            'tabletop = cap_bench.runner:main',
+        ],
     },
 )

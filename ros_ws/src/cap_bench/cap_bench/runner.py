@@ -36,7 +36,7 @@ from cap_bench.oracle import oracle_program
 from cap_bench.report import write_report
 from cap_bench.success import check
 from cap_bench.templates import GROUPS, TEMPLATES
-from cap_llm.safe_text import terminal_text
+from cap_lmp.safe_text import terminal_text
 
 SETTLE_S = 0.5  # simulated time the scene settles after the program before it is judged
 MAX_DOMAIN_ID = 232  # the largest ROS_DOMAIN_ID whose DDS ports are valid
@@ -125,7 +125,7 @@ class _EpisodeRunner:
         from cap_interfaces.action import ExecuteCommand
         from cap_interfaces.msg import GraphNames
         from cap_interfaces.srv import ResetScene
-        from cap_llm.graph import Graph, GraphOptions
+        from cap_bringup.graph import Graph, GraphOptions
 
         self.options = options
         self.context = Context()
@@ -236,12 +236,12 @@ class _EpisodeRunner:
 def _worker(index: int, keys: list[str], options: BenchOptions, cassette: str | None, results: str,
             progress) -> None:
     # Ctrl-C reaches every process of the terminal's group: the parent alone decides, and ends workers by SIGTERM
-    # (which closes the graph: see cap_llm.graph.Graph).
+    # (which closes the graph: see cap_bringup.graph.Graph).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # Each worker is a graph of its own: keep it on a DDS domain of its own.
     os.environ['ROS_DOMAIN_ID'] = str(options.first_domain_id + index)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    # Job i on CPU i: each job's threads share one interpreter lock (see cap_llm.cpu_affinity).
+    # Job i on CPU i: each job's threads share one interpreter lock (see cap_bringup.cpu_affinity).
     runner = _EpisodeRunner(options, pathlib.Path(cassette) if cassette else None, cpu=index)
     try:
         with open(results, 'a', encoding='utf-8') as out:

@@ -1,7 +1,7 @@
 """Facts of the table-top scene the benchmark is defined on (world frame, metres; "top" is +y, "left" is -x)."""
 from __future__ import annotations
 
-from cap_llm import tabletop
+from cap_lmp_ros.domains.tabletop import lmps as tabletop
 
 # Named positions on the table surface (z = 0): the ones the robot API of generated code knows.
 CORNERS: dict[str, tuple[float, float]] = dict(tabletop.CORNERS)

@@ -7,9 +7,9 @@ from cap_bench.episodes import sample_episode
 from cap_bench.oracle import oracle_program
 from cap_bench.success import check
 from cap_bench.templates import GROUPS
-from cap_llm.sandbox import Sandbox
-from cap_llm.tabletop import denormalize_xy
-from cap_llm.testing.table import Table
+from cap_lmp.sandbox import Sandbox
+from cap_lmp_ros.domains.tabletop.lmps import denormalize_xy
+from cap_lmp_ros.testing.table import Table
 
 ROWS = [(group, template) for group, (_, templates) in GROUPS.items() for template in templates]
 

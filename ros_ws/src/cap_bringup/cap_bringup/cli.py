@@ -1,0 +1,413 @@
+"""`cap`: the command line of cap-ros (works without ros2cli).
+
+    cap up --seed 3                                  bring up the whole simulated graph (Ctrl-C stops it)
+    cap send "put the red block in the blue bowl"   run a command, follow it to the end (exit 0: it ran to the end)
+    cap stop                                         stop the running program and every motion
+    cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
+    cap demo                                         the table-top demo (see cap_bringup/demo.py)
+    cap bench tabletop --trials 1                    the paper's table-top benchmark (see cap_bench/runner.py)
+
+Uses the ROS_DOMAIN_ID of the environment; discovery stays on this host unless ROS_AUTOMATIC_DISCOVERY_RANGE says
+otherwise.
+
+Exit codes: 0 done (for `cap send`: the program ran to the end and reported success); 1 failed (the program
+failed or was refused); 2 unreachable or misconfigured (nobody offers
+the action within --wait, no acknowledgement, a bad option, `cap up` missing a setting: one `error:` line says
+what); 3 timed out (`cap send --timeout` bounds the whole command, whatever phase it is in; the command is then
+cancelled); 130 / 143 ended by SIGINT (Ctrl-C) / SIGTERM, within a fraction of a second (`cap send` first asks
+lmp_node to cancel, waiting at most 2 s). `cap up` ends with 0 on either signal (that is how it is stopped), and
+with 70 when a thread the graph depends on died (one `error:` line names it): it does not live on unanswering.
+Everything printed that comes from the graph or the user (code, said lines, messages, the command echoed) has its
+control characters escaped (cap_lmp.safe_text.terminal_text).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.metadata
+import os
+import pathlib
+import signal
+import sys
+import threading
+import time
+from typing import Any, Callable, Sequence
+
+from cap_lmp.safe_text import one_line, terminal_text
+
+# Exit codes (README, "Commanding the robot yourself"). A command ended by SIGINT (Ctrl-C) or SIGTERM exits
+# 128 + the signal's number, 130 or 143, as shells report it; `cap up` exits 0 there, that is how it is stopped.
+EXIT_OK, EXIT_FAILED, EXIT_UNREACHABLE, EXIT_TIMEOUT = 0, 1, 2, 3
+CANCEL_GRACE_S = 2.0  # after --timeout or a signal: how long `cap send` waits for lmp_node to accept the cancel
+SAY_DRAIN_S = 0.3  # after the result: time for the last /cap/say lines to arrive
+
+
+class Interrupted(BaseException):
+    """SIGINT or SIGTERM arrived while a command waited (a BaseException, like KeyboardInterrupt)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.exit_code = 128 + signum
+
+
+class _Signals:
+    """SIGINT and SIGTERM only note the signal; the waiting loops check it (every spin slice) and end the command.
+
+    rclpy's own handlers are not installed: they shut the context down and swallow SIGTERM, so a command kept on
+    waiting for an answer that could no longer come.
+    """
+
+    def __init__(self) -> None:
+        self.received: int | None = None
+        self.event = threading.Event()
+        if threading.current_thread() is threading.main_thread():
+            for signum in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(signum, self._note)
+
+    def _note(self, signum, _frame) -> None:
+        if self.received is None:
+            self.received = signum
+        self.event.set()
+
+    def check(self) -> None:
+        if self.received is not None:
+            raise Interrupted(self.received)
+
+
+_installed: list[_Signals] = []
+
+
+def _signals() -> _Signals:
+    """The process's one _Signals, installed on first use (main() does it first, before the slow imports)."""
+    if not _installed:
+        _installed.append(_Signals())
+    return _installed[0]
+
+
+class _Session:
+    """rclpy context, one node and a single-threaded executor for the duration of one CLI command."""
+
+    SLICE_S = 0.05  # longest wait inside rclpy: bounds how late a signal or a deadline is noticed
+
+    def __init__(self, name: str) -> None:
+        os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        self.signals = _signals()
+        self.context = Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin_until(self, predicate: Callable[[], bool], timeout: float, interruptible: bool = True) -> bool:
+        """Spin until predicate() holds (True) or `timeout` [s] passes (False); a signal raises Interrupted."""
+        deadline = time.monotonic() + max(0.0, timeout)
+        while not predicate():
+            if interruptible:
+                self.signals.check()
+            if time.monotonic() >= deadline:
+                return False
+            self.executor.spin_once(timeout_sec=min(self.SLICE_S, max(0.0, deadline - time.monotonic())))
+        return True
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=0)
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def _say(text: str, out=None) -> None:
+    """Print a line that holds text from the graph (or from the user): never a raw control character."""
+    print(terminal_text(text), file=out or sys.stdout, flush=True)
+
+
+def _error(text: str) -> None:
+    _say(text, sys.stderr)
+
+
+def send(command: str, server_timeout: float, timeout: float, out=None) -> int:
+    """Send one command through the /cap/execute action, print its progress and return the exit code.
+
+    `timeout` [s] bounds the whole command, every phase included (finding lmp_node, the acknowledgement, the
+    result); `server_timeout` [s] bounds finding lmp_node and the acknowledgement. When the time is up, or on
+    SIGINT/SIGTERM, the command asks lmp_node to cancel (waiting at most CANCEL_GRACE_S) and ends.
+    """
+    from rclpy.action import ActionClient
+    from std_msgs.msg import String
+
+    from cap_interfaces.action import ExecuteCommand
+    from cap_interfaces.msg import GraphNames, StatusEvent
+
+    out = out or sys.stdout
+    deadline = time.monotonic() + timeout
+    session = _Session('cap_send')
+    client = ActionClient(session.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
+    session.node.create_subscription(String, GraphNames.SAY_TOPIC, lambda m: _say(f'robot says: {m.data}', out),
+                                     10)
+    stage_names = {getattr(StatusEvent, name): name[len('STAGE_'):].lower()
+                   for name in dir(StatusEvent) if name.startswith('STAGE_')}
+    last_stage: list[int] = []
+    goal_handle = None
+    goal_future = None
+
+    def on_feedback(message) -> None:
+        status = message.feedback.status
+        if last_stage and last_stage[-1] == status.stage:
+            return
+        last_stage.append(status.stage)
+        if status.stage == StatusEvent.STAGE_CODE:
+            _say('code:\n' + '\n'.join('    ' + line for line in status.code.splitlines()), out)
+        else:
+            detail = f': {status.message}' if status.message else ''
+            _say(f'[{stage_names.get(status.stage, status.stage)}]{detail}', out)
+
+    def left() -> float:
+        return deadline - time.monotonic()
+
+    def timed_out(phase: str) -> int:
+        _error(f'error: timed out after {timeout:g} s (--timeout) {phase}')
+        return EXIT_TIMEOUT
+
+    def cancel() -> bool:
+        """Ask lmp_node to cancel the goal; True when it answered within the grace."""
+        handle = goal_handle
+        if handle is None and goal_future is not None:
+            # Sent, but its acceptance is not here yet (a signal in between): the program may already run, so
+            # wait for the handle within the grace and cancel it then.
+            if session.spin_until(goal_future.done, CANCEL_GRACE_S, interruptible=False):
+                handle = goal_future.result()
+        if handle is None or not handle.accepted:
+            return False
+        future = handle.cancel_goal_async()
+        return session.spin_until(future.done, CANCEL_GRACE_S, interruptible=False)
+
+    try:
+        if not session.spin_until(client.server_is_ready, min(server_timeout, left())):
+            if left() <= 0.01:  # the overall deadline, not --wait, ended the wait
+                return timed_out(f'waiting for lmp_node ({GraphNames.EXECUTE_ACTION})')
+            _error(f'error: nobody offers {GraphNames.EXECUTE_ACTION}; is the graph up (cap up)? '
+                   f'ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}')
+            return EXIT_UNREACHABLE
+        _say(f'> {command}', out)
+        goal_future = client.send_goal_async(ExecuteCommand.Goal(command=command), feedback_callback=on_feedback)
+        if not session.spin_until(goal_future.done, min(server_timeout, left())):
+            if left() <= 0.01:  # the overall deadline, not --wait, ended the wait
+                return timed_out('waiting for lmp_node to acknowledge the command')
+            _error(f'error: lmp_node did not acknowledge the command within {server_timeout:g} s (--wait)')
+            return EXIT_UNREACHABLE
+        goal_handle = goal_future.result()
+        if not goal_handle.accepted:
+            _error('refused: lmp_node rejected the goal')  # it accepts every goal and answers refusals in the result
+            return EXIT_FAILED
+        result_future = goal_handle.get_result_async()
+        if not session.spin_until(result_future.done, left()):
+            cancelled = cancel()
+            return timed_out('waiting for the result; ' + ('the command was cancelled' if cancelled else
+                                                            f'lmp_node did not answer the cancel within '
+                                                            f'{CANCEL_GRACE_S:g} s'))
+        result = result_future.result().result
+        # What the robot said came on another topic: lines still in flight would be lost when the process ends.
+        session.spin_until(lambda: False, SAY_DRAIN_S)
+        if not result.success and result.message.startswith('refused'):
+            _say(result.message, out)  # says why (an empty command, a full queue, ...)
+        else:
+            _say(('success' if result.success else 'failed') + (f': {result.message}' if result.message else ''),
+                 out)
+        return EXIT_OK if result.success else EXIT_FAILED
+    except Interrupted as interrupted:
+        if goal_future is not None:
+            _error(f'interrupted ({interrupted}): ' + ('the command was cancelled' if cancel() else
+                                                       'lmp_node did not answer the cancel'))
+        else:
+            _error(f'interrupted ({interrupted})')
+        return interrupted.exit_code
+    finally:
+        session.close()
+
+
+def stop(server_timeout: float) -> int:
+    """Publish on /cap/stop once somebody listens."""
+    from std_msgs.msg import Empty
+
+    from cap_interfaces.msg import GraphNames
+
+    session = _Session('cap_stop')
+    try:
+        publisher = session.node.create_publisher(Empty, GraphNames.STOP_TOPIC, 10)
+        if not session.spin_until(lambda: publisher.get_subscription_count() > 0, server_timeout):
+            _error(f'error: nobody listens on {GraphNames.STOP_TOPIC}')
+            return EXIT_UNREACHABLE
+        publisher.publish(Empty())
+        # Give DDS a moment to deliver before the process exits.
+        session.spin_until(lambda: False, 0.3)
+        print(f'stop sent to {publisher.get_subscription_count()} listener(s)')
+        return EXIT_OK
+    except Interrupted as interrupted:
+        _error(f'interrupted ({interrupted})')
+        return interrupted.exit_code
+    finally:
+        session.close()
+
+
+def snapshot(cameras: Sequence[str], out_dir: pathlib.Path, server_timeout: float) -> int:
+    """Save one colour image per camera as PNG."""
+    import cv2
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    from cap_interfaces.msg import GraphNames
+    from cap_perception.ros_conversions import image_to_array
+
+    session = _Session('cap_snapshot')
+    images: dict[str, Image] = {}
+    try:
+        for camera in cameras:
+            session.node.create_subscription(Image, f'{GraphNames.CAMERA_NAMESPACE}/{camera}/color',
+                                             lambda m, c=camera: images.setdefault(c, m), qos_profile_sensor_data)
+        if not session.spin_until(lambda: len(images) == len(cameras), server_timeout):
+            missing = ', '.join(sorted(set(cameras) - set(images)))
+            _error(f'error: no image from camera(s) {missing} within {server_timeout:g} s')
+            return EXIT_UNREACHABLE
+        out_dir.mkdir(parents=True, exist_ok=True)
+        for camera, msg in images.items():
+            path = out_dir / f'{camera}.png'
+            cv2.imwrite(str(path), image_to_array(msg)[..., ::-1])
+            _say(str(path))
+        return EXIT_OK
+    except Interrupted as interrupted:
+        _error(f'interrupted ({interrupted})')
+        return interrupted.exit_code
+    finally:
+        session.close()
+
+
+def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, cassette: str,
+       record: bool) -> int:
+    """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM.
+
+    Exits 0 when stopped by a signal, FATAL_EXIT_CODE (70) when a thread the graph depends on died (the graph no
+    longer answered), 2 when the graph cannot be built as configured (one line says what to set).
+    """
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    from cap_lmp.errors import CapLLMError
+    from cap_bringup.graph import Graph, GraphOptions
+    from cap_lmp_ros.thread_watch import FATAL_EXIT_CODE
+
+    signals = _signals()
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    graph = None
+    try:
+        try:
+            graph = Graph(context, GraphOptions(seed=seed, objects=objects, real_time=real_time,
+                                                perception=perception, llm_backend=backend, cassette=cassette,
+                                                record_cassette=record))
+        except (ValueError, CapLLMError) as error:  # a configuration the user can fix: say what, in one line
+            _error(f'error: {one_line(str(error))}')
+            return EXIT_UNREACHABLE
+        if signals.received is None:
+            _say(f'cap-ros is up (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}): '
+                 f'{", ".join(graph.nodes)}. Send commands with: cap send "..."  Stop with Ctrl-C.')
+        while not signals.event.wait(0.2):
+            if graph.failed.is_set():  # the graph has said why (stderr); a zombie graph must not live on
+                _say('shutting down: the graph no longer answers')
+                return FATAL_EXIT_CODE
+        _say('shutting down')
+        return EXIT_OK
+    finally:
+        if graph is not None:
+            graph.close()
+        context.try_shutdown()
+
+
+BENCH_USAGE = """usage: cap bench tabletop [options]   (options: cap bench tabletop --help)
+
+The paper's simulated table-top benchmark through the cap-ros graph, e.g.
+    cap bench tabletop --trials 1                   one episode of every row with the reference programs
+    cap bench tabletop --policy llm --jobs 2        programs from CAP_LLM_BASE_URL / CAP_LLM_MODEL, two graphs
+"""
+
+
+BENCHMARK_GROUP = 'cap_ros.benchmarks'
+
+
+def benchmarks() -> dict[str, Any]:
+    """The benchmarks packages above this one offer, by name (entry points of the group `cap_ros.benchmarks`).
+
+    A benchmark builds on the graph, so its package sits above bringup and registers itself; bringup never names it.
+    """
+    return {entry.name: entry for entry in importlib.metadata.entry_points(group=BENCHMARK_GROUP)}
+
+
+def bench(argv: Sequence[str]) -> int:
+    """`cap bench NAME ...`: runs the registered benchmark NAME; anything else prints the usage."""
+    offered = benchmarks()
+    if argv[:1] and argv[0] in offered:
+        return int(offered[argv[0]].load()(list(argv[1:])))
+    if list(argv) in (['-h'], ['--help'], ['help']):
+        print(BENCH_USAGE, end='')
+        return EXIT_OK
+    print(BENCH_USAGE, end='', file=sys.stderr)
+    problem = f'unknown benchmark {argv[0]!r}' if argv else 'choose a benchmark'
+    names = ', '.join(sorted(offered)) or 'none installed'
+    _error(f'cap bench: error: {problem} (installed: {names})')
+    return EXIT_UNREACHABLE
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog='cap', description='Command a cap-ros robot in plain language.')
+    commands = parser.add_subparsers(dest='command', required=True)
+    p_up = commands.add_parser('up', help='bring up the simulated table-top graph (sim, perception, control, lmp)')
+    p_up.add_argument('--seed', type=int, default=0, help='scene seed [0]')
+    p_up.add_argument('--objects', default='', help='comma-separated objects, e.g. "red block, blue bowl"')
+    p_up.add_argument('--real-time', action='store_true', help='simulate in real time (default: as fast as possible)')
+    p_up.add_argument('--perception', choices=('ground_truth', 'rgbd'), default='ground_truth')
+    p_up.add_argument('--backend', choices=('cassette', 'http'), default='cassette',
+                      help='cassette (offline replay) or http (CAP_LLM_BASE_URL, CAP_LLM_MODEL, CAP_LLM_API_KEY)')
+    p_up.add_argument('--cassette', default='', help='cassette file (default: the packaged reference cassette)')
+    p_up.add_argument('--record', action='store_true', help='with --backend http: record answers into --cassette')
+    commands.add_parser('demo', help='run the table-top demo (options: cap demo --help)', add_help=False)
+    commands.add_parser('bench', help='the paper\'s table-top benchmark (cap bench tabletop --help)', add_help=False)
+    p_send = commands.add_parser('send', help='run a natural-language command and follow it to the end')
+    p_send.add_argument('text', help='the command, e.g. "put the red block in the blue bowl"')
+    p_send.add_argument('--timeout', type=float, default=600.0, help='give up after this many seconds [600]')
+    p_send.add_argument('--wait', type=float, default=10.0, help='wait this long for lmp_node [10 s]')
+    p_stop = commands.add_parser('stop', help='stop the running program and every motion')
+    p_stop.add_argument('--wait', type=float, default=5.0, help='wait this long for a listener [5 s]')
+    p_snap = commands.add_parser('snapshot', help='save camera images as PNG')
+    p_snap.add_argument('--camera', action='append', help='camera name (repeatable; default: front and top)')
+    p_snap.add_argument('--out', type=pathlib.Path, default=pathlib.Path('snapshots'), help='output folder')
+    p_snap.add_argument('--wait', type=float, default=10.0, help='wait this long for images [10 s]')
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    for stream in (sys.stdout, sys.stderr):  # a terminal that cannot show a character gets an escape, not a crash
+        if hasattr(stream, 'reconfigure'):
+            stream.reconfigure(errors='backslashreplace')
+    if argv[:1] == ['demo']:
+        from cap_bringup import demo
+        return demo.main([a for a in argv[1:] if a != '--'])
+    if argv[:1] == ['bench']:
+        return bench(argv[1:])
+    args = build_parser().parse_args(argv)
+    _signals()  # from here on SIGINT / SIGTERM end the command cleanly (rclpy's imports take a while)
+    if args.command == 'up':
+        return up(args.seed, args.objects, args.real_time, args.perception, args.backend, args.cassette, args.record)
+    if args.command == 'send':
+        return send(args.text, args.wait, args.timeout)
+    if args.command == 'stop':
+        return stop(args.wait)
+    return snapshot(args.camera or ['front', 'top'], args.out, args.wait)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,510 @@
+"""The LMP engine: prompts a code-writing model, generates missing functions, checks and runs the code.
+
+An LMP (language model program) is a few-shot prompt plus an LMPConfig. All LMPs of an Engine share one variable
+scope: the robot API, np and Shapely names, the LMPs that generated code may call (e.g. `parse_obj_name`), the
+functions generated so far, and the variables of the session. `Engine.run(command)` is what a front end (the ROS
+node, a CLI, a benchmark) calls; it never raises for problems of the generated code and returns a CommandResult.
+
+Prompt assembly, as in the Code as Policies paper: base prompt, then the session history (for LMPs that keep a
+session), then the context line (e.g. `objects = ['blue block', ...]`), then the query as a comment
+(`# put the blue block in the red bowl.`). The model's answer is code up to the stop sequences.
+
+Hierarchical function generation: the checked code's AST is searched for called bare names nothing defines; for
+each, the function-generation LMP is asked `# define function: y = f(x).`, the answer must define `f`, and its body
+is searched the same way, depth first. Children are defined before their parents, in the one shared scope, so a
+parent finds its children by name when it runs (that is the re-binding). A name already being generated higher in
+the chain is not asked for again (the cycle guard: mutual recursion then works once both exist); a chain longer
+than `max_function_depth` or more than `max_generated_functions` per command is an error.
+
+Limits of one command besides the sandbox's (sandbox.py):
+- **model deadline**: the model requests of one command (the top-level program, nested LMP calls and function
+  generation) take at most `model_time_limit_s` together; each request is sent with the budget that is left
+  (`CompletionRequest.time_budget_s`), and once it is spent the command stops with reason 'model_timeout' (inside a
+  running program through the watchdog, so the program cannot catch it). Model time does not count against the
+  execution time limit.
+- **program size**: a model answer, and a program together with the functions generated for it, may hold at most
+  wire.MAX_PROGRAM_CHARS characters; a longer one is refused before anything runs, so what runs is always what the
+  result and /cap/code show in full.
+- **memory**: a command stopped for memory (the watchdog's limit, or a MemoryError) drops the variables it bound;
+  if the session still holds more than half the limit afterwards, the session is reset, and the result says so.
+
+Threads: `run` executes on the calling thread and holds a lock (one command at a time); `cancel()` may be called
+from any thread and stops the running program at its next checkpoint with ExecutionStopped(reason='cancelled').
+"""
+from __future__ import annotations
+
+import ast
+import ctypes
+import gc
+import itertools
+import logging
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Mapping
+
+from cap_lmp.errors import CapLLMError, CodeRejected, ExecutionStopped, GenerationError
+from cap_lmp.functions import top_level_functions, undefined_calls
+from cap_lmp.llm import Completion, CompletionRequest, LLMClient
+from cap_lmp.sandbox import SANDBOX_FILE_PREFIX, CompiledProgram, Sandbox, SandboxLimits, bounded_exception_text
+from cap_lmp.wire import MAX_PROGRAM_CHARS
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class LMPConfig:
+    """One language model program: its prompt and how its answers are used."""
+
+    name: str
+    prompt: str  # the few-shot prompt text (see cap_lmp.prompts.load_prompt)
+    query_prefix: str = '# '
+    query_suffix: str = '.'
+    stop: tuple[str, ...] = ('#', 'objects = [')
+    maintain_session: bool = False  # keep earlier commands (context, query, code) in the prompt
+    has_return: bool = False  # the code sets `return_val_name`, which the call returns
+    return_val_name: str = 'ret_val'
+    context_var: str | None = None  # top-level runs add `<context_var> = <context_api()>`, e.g. objects = [...]
+    context_api: str | None = None
+    execute_context: bool = True  # run the context line before the code (so the code can use the variable)
+    callable_from_code: bool = False  # generated code may call this LMP by name: name(query, context='')
+    max_tokens: int = 512
+    temperature: float = 0.0
+
+
+@dataclass(frozen=True)
+class EngineEvent:
+    """Progress of a command, for /cap/status and /cap/code. stage: generating, code, executing, done, error."""
+
+    command_id: int
+    stage: str
+    lmp: str
+    code: str = ''
+    message: str = ''
+
+
+GENERATING, CODE, EXECUTING, DONE, ERROR = 'generating', 'code', 'executing', 'done', 'error'
+
+
+@dataclass
+class CommandResult:
+    """What one command did. `code` is the top-level program followed by the functions generated for it."""
+
+    command: str
+    command_id: int
+    success: bool
+    code: str = ''
+    message: str = ''
+    error_type: str = ''
+    error_line: int | None = None
+    error_source: str | None = None
+    stop_reason: str = ''  # for ExecutionStopped: 'timeout', 'cancelled', 'memory', 'recursion', 'model_timeout'
+    model_calls: int = 0
+    prompt_tokens: int = 0
+    completion_tokens: int = 0
+    timings: dict[str, float] = field(default_factory=dict)
+    generated_functions: list[str] = field(default_factory=list)
+
+
+@dataclass
+class _RunStats:
+    model_calls: int = 0
+    prompt_tokens: int = 0
+    completion_tokens: int = 0
+    model_s: float = 0.0
+    generated: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class PreparedCode:
+    """A checked answer of the model with the functions it needed, ready to run."""
+
+    main: CompiledProgram
+    functions: tuple[tuple[str, CompiledProgram], ...]
+
+    def full_code(self) -> str:
+        parts = [self.main.source.rstrip()]
+        parts += [program.source.rstrip() for _, program in self.functions]
+        return '\n\n'.join(part for part in parts if part)
+
+
+def check_program_size(text: str, what: str = "the model's answer") -> None:
+    """Refuse a program longer than wire.MAX_PROGRAM_CHARS before it is parsed or run."""
+    if len(text) > MAX_PROGRAM_CHARS:
+        raise CodeRejected(f'{what} has {len(text):,} characters; programs are limited to {MAX_PROGRAM_CHARS:,} '
+                           'characters, so it was not run')
+
+
+def _return_freed_memory() -> None:
+    """Collect garbage and hand freed heap back to the system (glibc), so resident memory reflects what is kept."""
+    gc.collect()
+    try:
+        ctypes.CDLL(None).malloc_trim(0)  # the process' own symbols: no file to open, no helper to run
+    except (OSError, AttributeError):
+        pass  # not glibc: resident memory shrinks later, or not at all
+
+
+def literal_assignment(line: str) -> tuple[str, Any] | None:
+    """(name, value) if `line` is `name = <Python literal>`, else None."""
+    try:
+        tree = ast.parse(line)
+    except (SyntaxError, ValueError, RecursionError, MemoryError):
+        return None
+    if len(tree.body) != 1 or not isinstance(tree.body[0], ast.Assign):
+        return None
+    statement = tree.body[0]
+    if len(statement.targets) != 1 or not isinstance(statement.targets[0], ast.Name):
+        return None
+    name = statement.targets[0].id
+    if name.startswith('_'):
+        return None
+    try:
+        return name, ast.literal_eval(statement.value)
+    except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
+        return None
+
+
+class Engine:
+    """LMPs over one shared scope, one LLM client and one sandbox. See the module docstring."""
+
+    def __init__(self, lmps: Iterable[LMPConfig], client: LLMClient, api: Mapping[str, Any] | None = None, *,
+                 limits: SandboxLimits | None = None, default_lmp: str | None = None, fgen_lmp: str | None = 'fgen',
+                 max_function_depth: int = 4, max_generated_functions: int = 16,
+                 model_time_limit_s: float = 120.0) -> None:
+        self.lmps: dict[str, LMPConfig] = {config.name: config for config in lmps}
+        if not self.lmps:
+            raise ValueError('an Engine needs at least one LMP')
+        self.client = client
+        self.api = dict(api or {})
+        self.sandbox = Sandbox(limits)
+        self.default_lmp = default_lmp or next(iter(self.lmps))
+        self.fgen_lmp = fgen_lmp if fgen_lmp in self.lmps else None
+        self.max_function_depth = max_function_depth
+        self.max_generated_functions = max_generated_functions
+        self.model_time_limit_s = model_time_limit_s
+        self._listeners: list[Callable[[EngineEvent], None]] = []
+        self._cancel = threading.Event()
+        self._run_lock = threading.Lock()
+        self._ids = itertools.count(1)
+        self._command_id = 0
+        self._stats = _RunStats()
+        self.reset()
+
+    # -- session ---------------------------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Start a new session: forget variables, generated functions and prompt history of earlier commands.
+
+        Waits for a running command to finish (call cancel() first to end it sooner). Rebinds `self.api`.
+        """
+        with self._run_lock:
+            self._reset_scope()
+
+    def _reset_scope(self) -> None:
+        names: dict[str, Any] = dict(self.api)
+        for config in self.lmps.values():
+            if config.callable_from_code:
+                names[config.name] = self._lmp_caller(config.name)
+        self.scope = self.sandbox.new_scope(names)
+        # The robot API, the LMPs, np and the Shapely names are put back before every command: a program that
+        # shadows one (`put_first_on_second = lambda a, b: ...`) changes it for its own command only.
+        fixed = set(names) | {'np'} | set(self.sandbox.shapely_names)
+        self._fixed_names = {name: self.scope[name] for name in fixed}
+        self.sandbox.reset_memory_baseline()  # variables the session keeps count against the memory limit
+        self.histories: dict[str, list[str]] = {name: [] for name in self.lmps}
+        self.functions: dict[str, str] = {}
+
+    def _lmp_caller(self, name: str) -> Callable[..., Any]:
+        def call_lmp(query: str, context: str = '', **variables: Any) -> Any:
+            return self.call_lmp(name, query, context, **variables)
+        return call_lmp
+
+    def add_listener(self, listener: Callable[[EngineEvent], None]) -> None:
+        """Receive an EngineEvent for every stage of every command (called on the running thread)."""
+        self._listeners.append(listener)
+
+    def cancel(self) -> None:
+        """Stop the running command at its next checkpoint (thread-safe; no effect when idle)."""
+        self._cancel.set()
+
+    def _emit(self, stage: str, lmp: str, code: str = '', message: str = '') -> None:
+        event = EngineEvent(self._command_id, stage, lmp, code, message)
+        for listener in self._listeners:
+            try:
+                listener(event)
+            except Exception:  # a broken listener must not break the command
+                _log.exception('engine event listener failed')
+
+    # -- prompting -------------------------------------------------------------------------------------------
+    def build_prompt(self, config: LMPConfig, query: str, context: str = '') -> str:
+        parts = [config.prompt.rstrip('\n')]
+        if config.maintain_session:
+            parts.extend(self.histories[config.name])
+        if context:
+            parts.append(context)
+        parts.append(f'{config.query_prefix}{query}{config.query_suffix}')
+        return '\n'.join(parts) + '\n'
+
+    def _ask(self, config: LMPConfig, query: str, context: str) -> str:
+        self._check_cancel()
+        remaining = self.model_time_limit_s - self._stats.model_s
+        if remaining <= 0:
+            self._model_deadline_passed()
+        request = CompletionRequest(lmp=config.name, prompt=self.build_prompt(config, query, context), query=query,
+                                    context=context, stop=config.stop, max_tokens=config.max_tokens,
+                                    temperature=config.temperature, time_budget_s=remaining)
+        started = time.monotonic()
+        completion: Completion | None = None
+        try:
+            completion = self.client.complete(request)
+        except Exception:
+            self._count_model_time(time.monotonic() - started)
+            self._check_cancel()
+            if self._stats.model_s >= self.model_time_limit_s:
+                self._model_deadline_passed()
+            raise
+        elapsed = time.monotonic() - started
+        # A client that measured the model itself (the sandbox process' node, which answers for it) knows better:
+        # the round trip around it is the program's time, as it is for the node's clock.
+        self._count_model_time(min(elapsed, completion.latency_s) if completion.latency_s > 0 else elapsed)
+        self._stats.prompt_tokens += completion.prompt_tokens
+        self._stats.completion_tokens += completion.completion_tokens
+        self._check_cancel()
+        check_program_size(completion.text)
+        return completion.text
+
+    def _count_model_time(self, seconds: float) -> None:
+        self._stats.model_s += seconds
+        self._stats.model_calls += 1
+        watchdog = self.sandbox.watchdog
+        if watchdog is not None:  # a nested LMP: the model's time does not count against the program
+            watchdog.exclude(seconds)
+
+    def _model_deadline_passed(self) -> None:
+        message = (f'the model deadline of {self.model_time_limit_s:g} s for one command passed '
+                   f'({self._stats.model_calls} model requests took {self._stats.model_s:.1f} s), so the command '
+                   'was stopped')
+        watchdog = self.sandbox.watchdog
+        if watchdog is not None:  # inside a running program: a stop it cannot catch
+            watchdog.stop(message, 'model_timeout')
+        raise ExecutionStopped(message, 'model_timeout')
+
+    def _check_cancel(self) -> None:
+        if self._cancel.is_set():
+            raise ExecutionStopped('the program was cancelled', 'cancelled')
+
+    # -- generation ------------------------------------------------------------------------------------------
+    def _known_names(self) -> set[str]:
+        return set(self.scope) | set(self.scope['__builtins__'])
+
+    def _prepare(self, config: LMPConfig, code: str) -> PreparedCode:
+        tree = self.sandbox.check(code)
+        functions: list[tuple[str, CompiledProgram]] = []
+        self._define_missing(tree, self._known_names(), (), functions)
+        prepared = PreparedCode(self.sandbox.compile_checked(tree, code, config.name), tuple(functions))
+        check_program_size(prepared.full_code(), 'the program with the functions generated for it')
+        return prepared
+
+    def _define_missing(self, tree: Any, known: set[str], chain: tuple[str, ...],
+                        out: list[tuple[str, CompiledProgram]]) -> None:
+        for missing in undefined_calls(tree, known):
+            if missing.name in chain or any(name == missing.name for name, _ in out):
+                continue  # being generated above us (recursion between functions) or already done
+            if self.fgen_lmp is None:
+                raise GenerationError(f'the code calls {missing.name}(), which is not defined')
+            if len(chain) >= self.max_function_depth:
+                path = ' -> '.join(chain + (missing.name,))
+                raise GenerationError(f'function generation went deeper than {self.max_function_depth} levels '
+                                      f'({path}); giving up')
+            if len(self._stats.generated) >= self.max_generated_functions:
+                raise GenerationError(f'the code needed more than {self.max_generated_functions} new functions; '
+                                      'giving up')
+            self._emit(GENERATING, self.fgen_lmp, message=f'define function: {missing.signature}')
+            source = self._ask(self.lmps[self.fgen_lmp], f'define function: {missing.signature}', '')
+            self._stats.generated.append(missing.name)
+            try:
+                function_tree = self.sandbox.check(source)
+            except CodeRejected as error:
+                raise CodeRejected(f'the generated function {missing.name}() was refused: {error}', error.line,
+                                   error.source_line) from None
+            defined = top_level_functions(function_tree)
+            if missing.name not in defined:
+                found = ', '.join(f'{name}()' for name in defined) or 'no function'
+                raise GenerationError(f'asked the model to define {missing.name}(), but its code defines {found}')
+            self._define_missing(function_tree, known | set(defined), chain + (missing.name,), out)
+            out.append((missing.name, self.sandbox.compile_checked(function_tree, source, f'function {missing.name}')))
+
+    def generate(self, lmp: str, query: str, context: str = '') -> PreparedCode:
+        """Ask the LMP's model for code and prepare it (checked, missing functions generated); nothing runs."""
+        config = self.lmps[lmp]
+        self._emit(GENERATING, lmp, message=query)
+        code = self._ask(config, query, context)
+        return self._prepare(config, code)
+
+    # -- execution -------------------------------------------------------------------------------------------
+    def _execute(self, config: LMPConfig, prepared: PreparedCode, query: str, context: str,
+                 variables: Mapping[str, Any] | None = None) -> Any:
+        for name, program in prepared.functions:
+            self.sandbox.execute(program, self.scope, self._cancel)
+            self.functions[name] = program.source
+        scope = self.scope if config.maintain_session else dict(self.scope)
+        scope.update(variables or {})
+        if context and config.execute_context:
+            literal = literal_assignment(context)
+            if literal is not None:  # the usual `objects = [...]`: no code to run
+                scope[literal[0]] = literal[1]
+            else:
+                self.sandbox.execute(self.sandbox.compile(context, f'{config.name} context'), scope, self._cancel)
+        self.sandbox.execute(prepared.main, scope, self._cancel)
+        if config.maintain_session:
+            use_query = f'{config.query_prefix}{query}{config.query_suffix}'
+            entry = '\n'.join(part for part in (context, use_query, prepared.main.source.rstrip()) if part)
+            self.histories[config.name].append(entry)
+        if config.has_return:
+            if config.return_val_name not in scope:
+                raise GenerationError(f'the {config.name} program did not set {config.return_val_name}')
+            return scope[config.return_val_name]
+        return None
+
+    def call_lmp(self, lmp: str, query: str, context: str = '', **variables: Any) -> Any:
+        """Run an LMP from generated code (or directly): generate, prepare, execute; return its value.
+
+        `variables` are set in the program's scope first (e.g. transform_shape_pts(..., shape_pts=pts)).
+        """
+        config = self.lmps[lmp]
+        bad = [name for name in variables if name.startswith('_')]
+        if bad:
+            raise ValueError(f'variables passed to {lmp} may not start with "_": {", ".join(bad)}')
+        watchdog = self.sandbox.watchdog
+        if watchdog is not None:  # called from a running program: our own host work needs no tracing
+            with watchdog.suspended():
+                prepared = self.generate(lmp, query, context)
+            watchdog.check()
+        else:
+            prepared = self.generate(lmp, query, context)
+        self._emit(CODE, lmp, code=prepared.full_code())
+        return self._execute(config, prepared, query, context, variables)
+
+    def context_for(self, config: LMPConfig) -> str:
+        """The context line of a top-level run, e.g. `objects = ['blue block', 'red bowl']`."""
+        if not config.context_var or not config.context_api:
+            return ''
+        value = self.api[config.context_api]()
+        return f'{config.context_var} = {list(value) if isinstance(value, tuple) else value!r}'
+
+    def run(self, command: str, lmp: str | None = None, context: str | None = None) -> CommandResult:
+        """Run one command end to end. Never raises for problems of the generated code: see CommandResult."""
+        with self._run_lock:
+            self._cancel.clear()
+            self._command_id = next(self._ids)
+            self._stats = _RunStats()
+            name = lmp or self.default_lmp
+            config = self.lmps[name]
+            result = CommandResult(command=command, command_id=self._command_id, success=False)
+            started = time.monotonic()
+            prepared: PreparedCode | None = None
+            execute_started = started
+            kept_scope, kept_functions = dict(self.scope), dict(self.functions)  # names only, for a memory stop
+            try:
+                if context is None:
+                    context = self.context_for(config)
+                prepared = self.generate(name, command, context)
+                result.code = prepared.full_code()
+                self._emit(CODE, name, code=result.code)
+                self._emit(EXECUTING, name, code=result.code)
+                execute_started = time.monotonic()
+                self.scope.update(self._fixed_names)
+                with self.sandbox.watching(self._cancel):  # one time limit for the whole program
+                    self._execute(config, prepared, command, context)
+                result.success = True
+            except Exception as error:  # everything a generated program can cause ends here, reported
+                self._report_failure(result, error)
+                del error  # its traceback holds the program's frames and their memory
+            if result.stop_reason == 'memory' or result.error_type == 'MemoryError':
+                result.message += self._recover_memory(kept_scope, kept_functions)
+            del kept_scope, kept_functions
+            finished = time.monotonic()
+            stats = self._stats
+            result.model_calls = stats.model_calls
+            result.prompt_tokens = stats.prompt_tokens
+            result.completion_tokens = stats.completion_tokens
+            result.generated_functions = list(stats.generated)
+            total = finished - started
+            result.timings = {'total_s': total, 'model_s': stats.model_s,
+                              'execute_s': finished - execute_started if prepared else 0.0,
+                              'overhead_s': total - stats.model_s}
+            if result.success:
+                self._emit(DONE, name, code=result.code, message='done')
+            else:
+                self._emit(ERROR, name, code=result.code, message=result.message)
+            return result
+
+    def _report_failure(self, result: CommandResult, error: Exception) -> None:
+        """Describe the failure; a message that cannot be built (a program's exception can carry anything) is
+        replaced by its type, and the session goes on."""
+        try:
+            self._describe_failure(result, error)
+        except Exception:  # a MemoryError, an int too long for str(), ...: the report itself must not fail
+            result.error_type = result.error_type or type(error).__name__
+            result.message = f'{type(error).__name__} (its message could not be shown)'
+
+    def _recover_memory(self, kept_scope: dict[str, Any], kept_functions: dict[str, str]) -> str:
+        """After a memory stop: drop what the command bound, reset the session if it still holds too much."""
+        self.scope.clear()
+        self.scope.update(kept_scope)
+        self.functions = kept_functions
+        _return_freed_memory()
+        if self.sandbox.memory_growth() <= self.sandbox.limits.max_memory_growth_bytes // 2:
+            return '; the variables this command set were dropped, the rest of the session is kept'
+        self._reset_scope()
+        _return_freed_memory()
+        self.sandbox.reset_memory_baseline()
+        return ('; the session still held too much memory, so it was reset (earlier variables and generated '
+                'functions are forgotten)')
+
+    def _describe_failure(self, result: CommandResult, error: Exception) -> None:
+        line, source_line, origin = self._locate(error)
+        if isinstance(error, CodeRejected):
+            result.error_type = 'SyntaxError' if 'syntax error' in str(error) else 'CodeRejected'
+            line, source_line = error.line, error.source_line
+            result.message = f'the generated code was refused: {error}'
+        elif isinstance(error, CapLLMError):
+            result.error_type = type(error).__name__
+            result.message = str(error)
+            if isinstance(error, ExecutionStopped):
+                result.stop_reason = error.reason
+        elif isinstance(error, MemoryError):
+            result.error_type = 'MemoryError'
+            result.message = 'MemoryError: the program ran out of memory'
+        else:
+            result.error_type = type(error).__name__
+            result.message = f'{type(error).__name__}: {bounded_exception_text(error)}'
+        if line is not None and not isinstance(error, CodeRejected) and source_line:
+            result.message += f' (line {line} of {origin}: `{source_line}`)'
+        result.error_line = line
+        result.error_source = source_line
+
+    def _locate(self, error: BaseException) -> tuple[int | None, str | None, str]:
+        """Line of generated code where the error arose: the innermost frame that belongs to a generated program."""
+        found: tuple[int | None, str | None, str] = (None, None, '')
+        for frame, line in traceback.walk_tb(error.__traceback__):
+            filename = frame.f_code.co_filename
+            if not filename.startswith(SANDBOX_FILE_PREFIX):
+                continue
+            program = self.sandbox.program_for(filename)
+            if program is None:
+                continue
+            lines = program.source.splitlines()
+            text = lines[line - 1].strip() if 0 < line <= len(lines) else None
+            if program.origin == self.default_lmp:
+                origin = 'the generated program'
+            elif program.origin in self.lmps:
+                origin = f'the generated {program.origin} program'
+            else:
+                origin = f'the generated {program.origin}'
+            found = (line, text, origin)
+        return found
+
+
+__all__ = ['CODE', 'DONE', 'ERROR', 'EXECUTING', 'GENERATING', 'CommandResult', 'Engine', 'EngineEvent',
+           'LMPConfig']

@@ -1,0 +1,226 @@
+"""The sandbox process: one session's Engine, scope and generated code, apart from lmp_node.
+
+Started by IsolatedEngine (isolated_engine.py) as `python -m cap_lmp.engine_process <data fd> <control fd>` with
+one end of two socket pairs. On the data socket, the first message is the setup (robot API names, sandbox limits,
+the model deadline, address-space limit); then the parent sends run / reset / close and the replies to the robot
+API calls and model requests this process makes, and this process sends engine events, API calls ('call'), model
+requests ('complete', the CompletionRequest's fields), the result of each run, and a heartbeat every HEARTBEAT_S
+while it can run Python. The main thread reads the data socket itself, also for the reply to a request (a hand-off
+between threads would cost about a millisecond per call). The control socket carries only cancel; a thread of its
+own watches it, and its closing means the parent is gone.
+
+No rclpy and no model client here: the robot and the model live in the parent, behind the `call` and `complete`
+messages, so this process needs no network, and the parent measures the model's time exactly (its reply carries
+that time, which the watchdog excludes from the program's time, as the parent's clock does).
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import os
+import resource
+import sys
+import threading
+import time
+from multiprocessing.connection import Connection
+from typing import Any, Callable
+
+from cap_lmp import wire
+from cap_lmp.sandbox.jail import enter_jail
+from cap_lmp.errors import CodeRejected, LLMError, RobotApiError
+from cap_lmp.llm import Completion, CompletionRequest
+from cap_lmp.wire import API_ERRORS, MAX_CODE_CHARS, MAX_PROMPT_CHARS, MEMORY_EXIT_CODE
+
+HEARTBEAT_S = 0.25
+
+
+class _Channel:
+    """The data socket to the parent: sends from several threads; the main thread receives."""
+
+    def __init__(self, connection: Connection) -> None:
+        self._connection = connection
+        self._send_lock = threading.Lock()
+        self._ids = itertools.count(1)
+        self.waiting_for_parent = threading.Event()  # an API call is out: the parent is busy, not us
+        self.call_seconds: list[float] = []  # round trips as the program sees them, reported with each result
+
+    def send(self, message: dict[str, Any]) -> None:
+        data = wire.encode(message)
+        with self._send_lock:
+            self._connection.send_bytes(data)
+
+    def receive(self) -> dict[str, Any]:
+        return wire.decode(self._connection.recv_bytes(wire.MAX_MESSAGE_BYTES))
+
+    def request(self, message: dict[str, Any]) -> dict[str, Any]:
+        """Send a request to the parent and wait for its reply (which must answer this request)."""
+        request_id = message['id'] = next(self._ids)
+        self.send(message)
+        self.waiting_for_parent.set()
+        try:
+            reply = self.receive()
+        except (EOFError, OSError, wire.WireError):
+            os._exit(0)  # the parent is gone (or spoke nonsense): nothing here is worth keeping
+        finally:
+            self.waiting_for_parent.clear()
+        if reply.get('op') != 'reply' or reply.get('id') != request_id:
+            raise RobotApiError('the node answered out of turn')
+        return reply
+
+    def call(self, name: str, args: tuple, kwargs: dict) -> Any:
+        started = time.perf_counter()
+        try:
+            reply = self.request({'op': 'call', 'name': name, 'args': list(args), 'kwargs': kwargs})
+        except wire.WireError as error:
+            raise TypeError(f'{name}: {error}') from None
+        self.call_seconds.append(time.perf_counter() - started)
+        error = reply.get('error')
+        if error:
+            raise API_ERRORS.get(str(error.get('type')), RobotApiError)(str(error.get('message', '')))
+        return reply.get('value')
+
+
+class _ParentModel:
+    """The LLMClient of this process: every request goes to the parent, which asks the model."""
+
+    def __init__(self, channel: _Channel) -> None:
+        self._channel = channel
+
+    def complete(self, request: CompletionRequest) -> Completion:
+        if len(request.prompt) > MAX_PROMPT_CHARS:
+            raise LLMError(f'the prompt has {len(request.prompt):,} characters, more than the limit of '
+                           f'{MAX_PROMPT_CHARS:,} (the session history grows with every command): reset the session')
+        fields = dataclasses.asdict(request)
+        fields['stop'] = list(request.stop)
+        try:
+            reply = self._channel.request({'op': 'complete', 'request': fields})
+        except wire.WireError as error:
+            raise LLMError(f'the model request cannot be sent: {error}') from None
+        error = reply.get('error')
+        if error:
+            kind = CodeRejected if error.get('type') == 'CodeRejected' else LLMError
+            raise kind(str(error.get('message', '')))
+        value = reply.get('completion')
+        return Completion(text=str(value['text']), model=str(value['model']),
+                          prompt_tokens=int(value['prompt_tokens']), completion_tokens=int(value['completion_tokens']),
+                          latency_s=float(value['latency_s']), source=str(value['source']))
+
+
+def _proxy(channel: _Channel, name: str) -> Callable[..., Any]:
+    def call_robot(*args: Any, **kwargs: Any) -> Any:
+        return channel.call(name, args, kwargs)
+    call_robot.__name__ = name
+    return call_robot
+
+
+def _limit_address_space(extra_bytes: int) -> None:
+    """Cap virtual memory at what is mapped now plus `extra_bytes`: a runaway allocation fails with MemoryError."""
+    if extra_bytes <= 0:
+        return
+    with open('/proc/self/status', encoding='ascii') as status:
+        mapped = next(int(line.split()[1]) * 1024 for line in status if line.startswith('VmSize:'))
+    limit = mapped + extra_bytes
+    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+
+def _build_engine(setup: dict[str, Any], channel: _Channel):
+    from cap_lmp.sandbox import SandboxLimits
+    from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
+
+    if setup.get('domain', 'tabletop') != 'tabletop':
+        raise ValueError(f"unknown domain {setup.get('domain')!r}")
+    limits = SandboxLimits(**setup.get('limits', {}))
+    api = {name: _proxy(channel, name) for name in setup['api']}
+    return build_tabletop_engine(api, _ParentModel(channel), limits,
+                                 model_time_limit_s=float(setup.get('model_time_limit_s', 120.0)))
+
+
+def serve(connection: Connection, control: Connection) -> None:
+    channel = _Channel(connection)
+    setup = channel.receive()
+    engine = _build_engine(setup, channel)
+    _limit_address_space(int(setup.get('address_space_extra_bytes', 0)))
+    # The jail comes last of the setup (the engine's modules are loaded, the memory cap is set) and before the
+    # threads start: Landlock and the capability drop bind the calling thread and the threads it starts later.
+    jail = setup.get('jail', 'required')
+    if jail != 'off':
+        enter_jail(required=(jail != 'best_effort'))
+    stopped = threading.Event()
+    busy = threading.Event()  # a request is being handled: the parent is listening for heartbeats
+    # A cancel names its run: a late one must not stop the next command, an early one (read before its run
+    # message) is applied at the run's first event, after Engine.run has cleared the previous cancel.
+    runs = {'current': 0, 'cancelled': 0}
+
+    def forward(event) -> None:
+        if runs['cancelled'] == runs['current']:
+            engine.cancel()
+        fields = dataclasses.asdict(event)
+        fields['code'] = fields['code'][:MAX_CODE_CHARS]
+        fields['message'] = fields['message'][:MAX_CODE_CHARS]
+        channel.send({'op': 'event', **fields})
+
+    engine.add_listener(forward)
+
+    def watch_control() -> None:
+        try:
+            while True:
+                message = wire.decode(control.recv_bytes(1024))
+                run_id = message.get('run')
+                if message.get('op') == 'cancel' and isinstance(run_id, int) and run_id >= runs['current']:
+                    runs['cancelled'] = run_id
+                    if run_id == runs['current']:
+                        engine.cancel()
+        except MemoryError:
+            os._exit(MEMORY_EXIT_CODE)
+        except BaseException:  # EOF: the parent is gone; anything else: it spoke nonsense
+            pass
+        stopped.set()
+        os._exit(0)
+
+    def beat() -> None:
+        try:
+            while not stopped.wait(HEARTBEAT_S):
+                if busy.is_set() and not channel.waiting_for_parent.is_set():
+                    channel.send({'op': 'alive'})
+        except MemoryError:
+            os._exit(MEMORY_EXIT_CODE)
+        except BaseException:  # without heartbeats the parent would call the next long step a stall
+            os._exit(4)
+
+    threading.Thread(target=watch_control, name='engine_process_control', daemon=True).start()
+    threading.Thread(target=beat, name='engine_process_heartbeat', daemon=True).start()
+    channel.send({'op': 'ready', 'default_lmp': engine.default_lmp})
+    while True:
+        try:
+            message = channel.receive()
+        except (EOFError, OSError, wire.WireError):
+            os._exit(0)
+        op = message.get('op')
+        busy.set()
+        if op == 'run':
+            run_id = message.get('run')
+            runs['current'] = run_id if isinstance(run_id, int) else 0
+            channel.call_seconds.clear()
+            result = dataclasses.asdict(engine.run(str(message.get('command', ''))))
+            result['code'] = result['code'][:MAX_CODE_CHARS]  # the node accepts at most wire.MAX_RESULT_BYTES
+            channel.send({'op': 'result', 'result': result, 'api_call_seconds': channel.call_seconds[-10_000:]})
+        elif op == 'reset':
+            engine.reset()
+            channel.send({'op': 'reset_done'})
+        elif op == 'close':
+            os._exit(0)
+        busy.clear()
+
+
+def main() -> None:
+    connection, control = Connection(int(sys.argv[1])), Connection(int(sys.argv[2]))
+    # Output of the process goes to the parent's stderr; stdout stays free of stray prints.
+    sys.stdout = sys.stderr
+    try:
+        serve(connection, control)
+    except MemoryError:
+        os._exit(MEMORY_EXIT_CODE)
+
+
+if __name__ == '__main__':
+    main()

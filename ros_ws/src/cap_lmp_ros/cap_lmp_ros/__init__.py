@@ -1,0 +1,1 @@
+"""The ROS binding of the LMP engine: lmp_node, its command queue, and the domain registry with the table-top domain (prompts, LMPs, robot API)."""

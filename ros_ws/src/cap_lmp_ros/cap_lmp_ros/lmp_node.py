@@ -1,0 +1,400 @@
+"""lmp_node: natural-language commands in, generated and executed policy code out.
+
+Commands arrive on /cap/command (std_msgs/String) or as /cap/execute goals. One runs at a time on a worker thread;
+later ones wait in a FIFO of `max_queued_commands` and are refused when it is full (see command_queue.py). A
+command is put on one line before it reaches a prompt; an empty or over-long one is refused. Every command gets an
+answer on /cap/status, refused ones included (and every /cap/execute goal is accepted and gets a result saying
+what happened). Every stage is published on /cap/status; the generated code on /cap/code, what the robot says on
+/cap/say. /cap/stop ends the running program and its motion and drops waiting commands. /cap/reset_session forgets
+the session.
+
+Whatever a program or a model produced is made safe before it leaves the node (safe_text.wire_text: valid UTF-8,
+bounded; logs also without control characters), so no text can kill the thread that publishes it. If the worker
+thread dies anyway, the node refuses every later command naming the cause, and the standalone process (`main`)
+logs one line and exits with thread_watch.FATAL_EXIT_CODE instead of living on without answering.
+
+Parameters are read at start-up; of those changed at run time, max_queued_commands, service_timeout_s and
+motion_timeout_s take effect from the next command, and every other change is rejected with the reason.
+"""
+from __future__ import annotations
+
+import os
+import pathlib
+import sys
+from typing import Any
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.task import Future
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Empty, String
+from std_srvs.srv import Trigger
+
+from cap_interfaces.action import ExecuteCommand
+from cap_interfaces.msg import GraphNames, StatusEvent
+from cap_lmp import engine as engine_module
+from cap_lmp.cassette import make_client
+from cap_lmp_ros.command_queue import CommandQueue, Job
+from cap_lmp.isolated_engine import JAIL_MODES, IsolatedEngine
+from cap_lmp.llm import NO_MODEL_CONFIGURED
+from cap_lmp_ros.domains.tabletop.robot_api import RosTabletopApi
+from cap_lmp.safe_text import terminal_text, wire_text
+from cap_lmp.sandbox import SandboxLimits
+from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
+from cap_lmp_ros.thread_watch import FATAL_EXIT_CODE, ThreadWatch
+from cap_lmp.wire import MAX_CODE_CHARS
+
+DEFAULT_CASSETTE = pathlib.Path(__file__).resolve().parent / 'domains' / 'tabletop' / 'cassettes' / 'tabletop_reference.yaml'
+
+# Commands and stops must not be lost: reliable, a few deep.
+COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+# Status and code are events a late subscriber may want to see the last few of.
+EVENT_QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+_STAGES = {engine_module.GENERATING: StatusEvent.STAGE_GENERATING, engine_module.CODE: StatusEvent.STAGE_CODE,
+           engine_module.EXECUTING: StatusEvent.STAGE_EXECUTING}
+# Parameters whose change at run time takes effect from the next command; any other change is rejected.
+RUNTIME_PARAMETERS = ('max_queued_commands', 'service_timeout_s', 'motion_timeout_s')
+
+
+class LmpNode(Node):
+    """See the module docstring. `thread_watch` is told when the worker thread dies (default: a watch of its own
+    that logs it); a ValueError whose message is one line says what to fix in the configuration."""
+
+    def __init__(self, *, thread_watch: ThreadWatch | None = None, **kwargs: Any) -> None:
+        super().__init__('lmp_node', **kwargs)
+        self._declared: set[str] = set()
+        backend = self._parameter('llm_backend', 'cassette', 'cassette (replay a recorded cassette, offline) or '
+                                  'http (an OpenAI-compatible endpoint; CAP_LLM_BASE_URL, CAP_LLM_MODEL, '
+                                  'CAP_LLM_API_KEY from the environment unless set below).')
+        cassette = self._parameter('cassette', '', 'Cassette file for llm_backend=cassette, or the file to record '
+                                   'into with record_cassette=true; empty: the packaged reference cassette.')
+        cassette = cassette or str(DEFAULT_CASSETTE)
+        record = self._parameter('record_cassette', False, 'With llm_backend=http: also record every answer '
+                                 'into `cassette`.')
+        base_url = self._parameter('base_url', '', 'OpenAI-compatible endpoint; empty: CAP_LLM_BASE_URL.')
+        model = self._parameter('model', '', 'Model name; empty: CAP_LLM_MODEL.')
+        api = self._parameter('api', 'chat', 'chat (chat completions) or completions (legacy completions).')
+        request_timeout = self._parameter('request_timeout_s', 60.0, 'Timeout of one model request [s].')
+        time_limit = self._parameter('time_limit_s', 300.0, 'Wall-clock limit of one generated program, robot '
+                                     'motion included [s].')
+        service_timeout = self._parameter('service_timeout_s', 5.0, 'Timeout of one perception request [s].')
+        motion_timeout = self._parameter('motion_timeout_s', 180.0, 'Timeout of one pick-and-place [s].')
+        max_queued = self._parameter('max_queued_commands', 5, 'Commands that may wait while one runs; more are '
+                                     'refused.')
+        domain = self._parameter('domain', 'tabletop', 'Robot domain of the prompts and API (tabletop).')
+        if domain != 'tabletop':
+            raise ValueError(f'parameter domain={domain!r}: only "tabletop" exists so far')
+
+        isolated = self._parameter('sandbox_process', True, 'Run generated programs in a sandbox process of their '
+                                   'own (a crash or a stuck C call then costs the session, not the node); false: '
+                                   'in this process (faster to start, for debugging).')
+        stall_limit = self._parameter('stall_limit_s', 10.0, 'With sandbox_process: kill the sandbox process when '
+                                      'one operation holds it this long without a pause [s].')
+        jail = self._parameter('jail', 'required', 'With sandbox_process: the kernel jail of the sandbox process '
+                               '(no file writes, sockets, exec or new processes): required (the node does not '
+                               'start without it), best_effort (what the kernel offers, the rest logged) or off.')
+        if jail not in JAIL_MODES:
+            raise ValueError(f'parameter jail={jail!r} is not one of {", ".join(JAIL_MODES)}')
+
+        http_options: dict[str, Any] = {'timeout_s': request_timeout, 'api': api}
+        if base_url:
+            http_options['base_url'] = base_url
+        if model:
+            http_options['model'] = model
+        if backend == 'cassette':
+            client_options: dict[str, Any] = {'cassette': cassette}
+        elif backend == 'http':
+            # Checked here, not where the client is built (possibly in the sandbox process): one line, at once.
+            if not (model or os.environ.get('CAP_LLM_MODEL')):
+                raise ValueError(NO_MODEL_CONFIGURED)
+            client_options = {'cassette': cassette if record else None, 'record': record, **http_options}
+        else:
+            raise ValueError(f'parameter llm_backend={backend!r} is not one of cassette, http')
+        if api not in ('chat', 'completions'):
+            raise ValueError(f'parameter api={api!r} is not one of chat, completions')
+
+        self._code_publisher = self.create_publisher(String, GraphNames.CODE_TOPIC, EVENT_QOS)
+        self._status_publisher = self.create_publisher(StatusEvent, GraphNames.STATUS_TOPIC, EVENT_QOS)
+        say_publisher = self.create_publisher(String, GraphNames.SAY_TOPIC, EVENT_QOS)
+        self.robot = RosTabletopApi(self, say_publisher, service_timeout, motion_timeout)
+        model_time_limit = self._parameter('model_time_limit_s', 120.0, 'Overall model time per command [s].')
+        limits = SandboxLimits(time_limit_s=time_limit)
+        if isolated:
+            self.engine = IsolatedEngine(self.robot.functions(), make_client(**client_options), limits, domain=domain,
+                                         stall_limit_s=stall_limit, model_time_limit_s=model_time_limit,
+                                         jail=jail)
+        else:
+            self.engine = build_tabletop_engine(self.robot.functions(), make_client(**client_options), limits,
+                                                model_time_limit_s=model_time_limit)
+        self.engine.add_listener(self._on_engine_event)
+        self.queue = CommandQueue(max_queued)
+        self._current: Job | None = None
+        self._closing = False
+        self.thread_watch = thread_watch or ThreadWatch(log=self._log_fatal)
+
+        # Commands, stop and reset are handled apart from the action server so that a stop is never stuck behind
+        # a goal callback; the action group is reentrant because execute callbacks wait for their job.
+        control = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(String, GraphNames.COMMAND_TOPIC, self._on_command, COMMAND_QOS,
+                                 callback_group=control)
+        self.create_subscription(Empty, GraphNames.STOP_TOPIC, lambda _: self.stop('stopped on /cap/stop'),
+                                 COMMAND_QOS, callback_group=control)
+        self.create_service(Trigger, GraphNames.RESET_SESSION_SERVICE, self._on_reset, callback_group=control)
+        self._action = ActionServer(self, ExecuteCommand, GraphNames.EXECUTE_ACTION, self._execute_goal,
+                                    goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
+                                    callback_group=ReentrantCallbackGroup())
+        # Registered after every declaration: declaring (with the start-up overrides) must not be refused.
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.thread_watch.add_callback(self._refuse_waiting)
+        self._worker = self.thread_watch.start(self._work, 'lmp_worker')
+        where = f'sandbox process {self.engine.pid}' if isolated else 'in-process sandbox'
+        self.get_logger().info(f'ready: LLM backend {backend}' + (f' ({cassette})' if backend == 'cassette' else '')
+                               + f', {where}')
+
+    def _parameter(self, name: str, default: Any, description: str) -> Any:
+        self._declared.add(name)
+        return self.declare_parameter(name, default, ParameterDescriptor(description=description)).value
+
+    def _on_set_parameters(self, parameters: list) -> SetParametersResult:
+        """Apply the few parameters that can change between commands; reject any other change, saying why."""
+        for parameter in parameters:
+            if parameter.name not in self._declared:
+                continue
+            if parameter.name not in RUNTIME_PARAMETERS:
+                return SetParametersResult(successful=False, reason=(
+                    f'{parameter.name} is read when lmp_node starts and cannot change while it runs; restart it '
+                    f'with the new value (--ros-args -p {parameter.name}:=...); changeable at run time: '
+                    + ', '.join(RUNTIME_PARAMETERS)))
+            value = parameter.value
+            if parameter.name == 'max_queued_commands' and (not isinstance(value, int) or value < 0):
+                return SetParametersResult(successful=False, reason='max_queued_commands must be 0 or more')
+            if parameter.name != 'max_queued_commands' and (not isinstance(value, float) or not value > 0):
+                return SetParametersResult(successful=False, reason=f'{parameter.name} must be more than 0 s')
+        for parameter in parameters:
+            if parameter.name == 'max_queued_commands':
+                self.queue.max_waiting = parameter.value
+            elif parameter.name == 'service_timeout_s':
+                self.robot.service_timeout_s = parameter.value
+            elif parameter.name == 'motion_timeout_s':
+                self.robot.motion_timeout_s = parameter.value
+        return SetParametersResult(successful=True)
+
+    def _refuse_waiting(self, failure: str) -> None:
+        """A thread the node depends on died: answer the commands that would otherwise wait for ever."""
+        for job in self.queue.drain():
+            job.refusal = f'refused: lmp_node cannot run commands any more ({failure})'
+            job.outcome = 'refused'
+            self._publish_status(job, StatusEvent.STAGE_REFUSED, message=job.refusal)
+            job.finished.set()
+
+    def _log_fatal(self, line: str) -> None:
+        self.get_logger().fatal(line)
+
+    def _log_error(self, text: str) -> None:
+        try:
+            self.get_logger().error(terminal_text(text))
+        except Exception:  # a logger that is gone (shutdown) must not end the thread that logs
+            pass
+
+    # -------------------------------------------------------------------------------------------- intake
+    def _on_command(self, msg: String) -> None:
+        self.submit(msg.data, 'topic')
+
+    def submit(self, command: str, source: str, goal_handle: Any = None) -> tuple[Job, bool]:
+        """Queue a command, or refuse it; either way its answer is on /cap/status."""
+        job, queued = self.queue.submit(command, source, goal_handle)
+        if queued and self.thread_watch.failure and self.queue.withdraw(job):  # nothing would ever run it
+            queued = False
+            job.refusal = f'refused: lmp_node cannot run commands any more ({self.thread_watch.failure})'
+        if queued:
+            self._publish_status(job, StatusEvent.STAGE_RECEIVED, message=f'queued behind {self.queue.waiting() - 1}'
+                                 if self.queue.waiting() > 1 else '')
+        else:
+            self._publish_status(job, StatusEvent.STAGE_REFUSED, message=job.refusal)
+            job.outcome = 'refused'
+            job.finished.set()
+        return job, queued
+
+    def _on_goal(self, goal_request) -> GoalResponse:
+        # Every goal is accepted: a refusal is a result with a message, which a rejected goal cannot carry.
+        return GoalResponse.ACCEPT
+
+    def _execute_goal(self, goal_handle):
+        job, queued = self.submit(goal_handle.request.command, 'action', goal_handle)
+        try:
+            while not job.finished.wait(0.02):
+                if goal_handle.is_cancel_requested and not job.cancel_requested:
+                    job.cancel_requested = True
+                    job.stop_reason = 'cancelled by the client of /cap/execute'
+                    if self.queue.withdraw(job):
+                        job.outcome = 'cancelled'
+                        self._publish_status(job, StatusEvent.STAGE_CANCELLED, message='cancelled before it ran')
+                        job.finished.set()
+                    elif self._current is job:
+                        self._stop_running()
+        finally:
+            job.goal_handle = None
+        result = ExecuteCommand.Result(command_id=job.command_id)
+        if job.result is not None:
+            result.success = bool(job.result.success)
+            result.code = wire_text(job.result.code, MAX_CODE_CHARS)
+            result.message = wire_text(job.result.message or 'done')
+            result.model_calls = int(job.result.model_calls)
+            result.prompt_tokens = int(job.result.prompt_tokens)
+            result.completion_tokens = int(job.result.completion_tokens)
+            result.model_seconds = float(job.result.timings.get('model_s', 0.0))
+            result.total_seconds = float(job.result.timings.get('total_s', 0.0))
+        else:
+            result.message = job.refusal or {'cancelled': 'cancelled before it ran',
+                                             'error': 'failed outside the program (see /cap/status)'}.get(
+                job.outcome, job.outcome or 'lmp_node stopped before the command ran')
+        if job.outcome == 'cancelled' and goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        elif result.success:
+            goal_handle.succeed()
+        else:
+            goal_handle.abort()
+        return result
+
+    # -------------------------------------------------------------------------------------------- running
+    def _work(self) -> None:
+        while True:
+            job = self.queue.next_job()
+            if job is None:
+                return
+            self._current = job
+            self.robot.stop_requested.clear()
+            try:
+                job.result = self.engine.run(job.command)
+                job.outcome = self._outcome(job)
+            except Exception as error:  # the engine reports program errors itself; this is a last resort
+                if self._closing:
+                    return
+                job.outcome = 'error'
+                text = f'internal error: {type(error).__name__}: {wire_text(str(error))}'
+                self._log_error(f'{job.command_id} failed outside the program: {text}')
+                self._publish_status(job, StatusEvent.STAGE_ERROR, message=text)
+            finally:
+                self._current = None
+                self.queue.finish(job)
+
+    def _outcome(self, job: Job) -> str:
+        """Publish the final status of a job that ran, and name its outcome."""
+        result = job.result
+        if result.success:
+            stage, outcome = StatusEvent.STAGE_DONE, 'done'
+        elif result.error_type in ('CodeRejected', 'SyntaxError'):
+            # The program never ran: nothing moved.
+            stage, outcome = StatusEvent.STAGE_REFUSED, 'refused'
+        elif result.stop_reason == 'cancelled' or result.error_type == 'StoppedError' or job.cancel_requested:
+            stage, outcome = StatusEvent.STAGE_CANCELLED, 'cancelled'
+            if job.stop_reason:
+                result.message = f'{job.stop_reason} ({result.message})'
+        else:
+            stage, outcome = StatusEvent.STAGE_ERROR, 'error'
+        # The final status says what the command cost, model time first: it has a deadline of its own.
+        cost = (f"model {result.timings.get('model_s', 0.0):.2f} s in {result.model_calls} call(s), "
+                f"total {result.timings.get('total_s', 0.0):.2f} s")
+        self._publish_status(job, stage, code=result.code, message=f'{result.message or outcome} ({cost})')
+        return outcome
+
+    def _on_engine_event(self, event: engine_module.EngineEvent) -> None:
+        job = self._current
+        if job is None:
+            return
+        top_level = event.lmp == self.engine.default_lmp
+        if event.stage in (engine_module.DONE, engine_module.ERROR):
+            return  # the final status is published once the run returns (see _outcome)
+        if event.stage == engine_module.CODE and top_level and not self._closing:
+            self._code_publisher.publish(String(data=wire_text(event.code, MAX_CODE_CHARS)))
+        if top_level or event.stage == engine_module.GENERATING:
+            message = event.message if top_level else f'{event.lmp}: generating'
+            self._publish_status(job, _STAGES[event.stage], code=event.code if top_level else '', message=message)
+
+    def _publish_status(self, job: Job, stage: int, code: str = '', message: str = '') -> None:
+        if self._closing:
+            return
+        status = StatusEvent(command_id=job.command_id, command=wire_text(job.command), stage=stage,
+                             code=wire_text(code, MAX_CODE_CHARS), message=wire_text(message))
+        status.header.stamp = self.get_clock().now().to_msg()
+        self._status_publisher.publish(status)
+        goal_handle = job.goal_handle
+        if goal_handle is not None:
+            goal_handle.publish_feedback(ExecuteCommand.Feedback(status=status))
+
+    # -------------------------------------------------------------------------------------------- stop, reset
+    def _stop_running(self) -> None:
+        self.engine.cancel()
+        self.robot.stop()
+
+    def stop(self, reason: str) -> None:
+        """End the running command and its motion; drop waiting commands."""
+        for job in self.queue.drain():
+            job.outcome = 'cancelled'
+            self._publish_status(job, StatusEvent.STAGE_CANCELLED, message=reason)
+            job.finished.set()
+        current = self._current
+        if current is not None:
+            current.cancel_requested = True
+            current.stop_reason = reason
+            self._stop_running()
+        self.get_logger().info(terminal_text(reason))
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        if self._current is not None:
+            response.success = False
+            response.message = wire_text(f'a command is running ({self._current.command!r}); stop it first')
+            return response
+        self.engine.reset()
+        response.success = True
+        response.message = 'session reset: earlier variables and generated functions are forgotten'
+        return response
+
+    def destroy_node(self) -> None:
+        self._closing = True
+        self.thread_watch.stop()
+        self.queue.close()
+        self._stop_running()
+        close = getattr(self.engine, 'close', None)
+        if close is not None:
+            close()
+        super().destroy_node()
+
+
+def main(args=None) -> None:
+    """The `lmp_node` entry point. Exits 0 on Ctrl-C or SIGTERM, 2 on a configuration error (one line), and
+    FATAL_EXIT_CODE when a thread it depends on died (one line naming the thread and the error)."""
+    rclpy.init(args=args)
+    watch = ThreadWatch()
+    watch.install_excepthook()  # any other thread of this process that dies is fatal too
+    try:
+        node = LmpNode(thread_watch=watch)
+    except ValueError as error:
+        print(f'lmp_node: {terminal_text(str(error))}', file=sys.stderr)
+        rclpy.try_shutdown()
+        sys.exit(2)
+    watch.log = node._log_fatal
+    executor = MultiThreadedExecutor(num_threads=4)
+    executor.add_node(node)
+    died = Future()
+    watch.add_callback(lambda _line: died.set_result(True))
+    status = 0
+    try:
+        executor.spin_until_future_complete(died)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception as error:  # a callback raised: the executor re-raises it here
+        watch.report('executor', error)
+    finally:
+        if watch.failure:
+            status = FATAL_EXIT_CODE
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    if status:
+        sys.exit(status)
