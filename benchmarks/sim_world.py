@@ -26,7 +26,8 @@ os.environ.setdefault('MUJOCO_GL', 'egl')
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from cap_sim_bridge.scene import COLORS, ObjectSpec  # noqa: E402
+from cap_sim_bridge.scene import ObjectSpec  # noqa: E402
+from cap_tabletop.palette import PALETTE as COLORS  # noqa: E402
 from cap_sim_bridge.world import HOME_JOINT_POSITIONS, TabletopWorld  # noqa: E402
 
 SIM_SECONDS = 10.0

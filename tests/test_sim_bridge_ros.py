@@ -27,7 +27,8 @@ from cap_interfaces.action import FollowJointTrajectory, GripperCommand
 from cap_interfaces.msg import GraphNames, JointTolerance, ObjectArray, ObjectSpec
 from cap_interfaces.srv import ResetScene
 from cap_sim_bridge.bridge_node import SimBridgeNode
-from cap_sim_bridge.world import ARM_JOINT_NAMES, CAMERA_NAMES, GRIPPER_JOINT_NAMES
+from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES
+from cap_tabletop.cameras import CAMERA_NAMES
 
 WIDTH, HEIGHT = 320, 240
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from cap_control.kinematics import HOME_JOINTS, forward_kinematics, inverse_kinematics, top_down_pose
-from cap_sim_bridge.scene import BOWL_BOTTOM_THICKNESS, BOWL_INNER_RADIUS, ObjectSpec
+from cap_sim_bridge.scene import ObjectSpec
+from cap_tabletop.objects import BOWL_BOTTOM_THICKNESS, BOWL_INNER_RADIUS
 from cap_sim_bridge.world import GRIPPER_MAX_OPENING, TabletopWorld
 
 LIFT = 0.10

@@ -1,5 +1,3 @@
-from glob import glob
-
 from setuptools import find_packages, setup
 
 package_name = 'cap_tabletop'
@@ -17,7 +15,8 @@ setup(
     zip_safe=False,
     maintainer='cap-ros maintainers',
     maintainer_email='maintainers@cap-ros.dev',
-    description='Facts of the table-top domain (pure Python): palette, object categories and sizes, table bounds, named positions, cameras.',
+    description=('Facts of the table-top domain (pure Python): palette, object categories and sizes, table bounds, '
+                 'named positions, cameras.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

@@ -10,7 +10,7 @@ import numpy as np
 
 from cap_bench import table
 from cap_bench.episodes import MAGNITUDE_DISTANCES, ORDINALS, Episode
-from cap_lmp_ros.domains.tabletop.lmps import NORMALISED_ORIGIN, NORMALISED_SPAN
+from cap_tabletop.workspace import NORMALISED_ORIGIN, NORMALISED_SPAN
 
 _BLOCKS = "block_names = [name for name in get_obj_names() if name.endswith('block')]\n"
 _BOWLS = "bowl_names = [name for name in get_obj_names() if name.endswith('bowl')]\n"

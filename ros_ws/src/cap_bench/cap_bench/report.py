@@ -10,7 +10,7 @@ import numpy as np
 
 from cap_bench.templates import GROUPS
 
-# The paper's Code as Policies results (code-davinci-002), % success per row (BENCHMARK.md).
+# The Code as Policies paper's simulated table-top results (code-davinci-002), % success per row.
 PAPER: dict[str, dict[str, float]] = {
     'SA-SI': {'pick_place': 100, 'stack': 94, 'blocks_on_corner': 92, 'blocks_in_bowl': 100, 'matching_bowls': 100,
               'block_by_direction': 72, 'block_by_distance': 98, 'nth_block': 98},

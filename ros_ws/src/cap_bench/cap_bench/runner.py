@@ -216,13 +216,15 @@ class _EpisodeRunner:
         _wait(lambda: world.time >= settle_until, 30)
         final = {s.name: s.position for s in world.object_states()}
         verdict = check(episode, initial, final)
-        record.update(code=result.code, success=bool(result.success and verdict.success),
+        done = result.outcome == self.ExecuteCommand.Result.OUTCOME_DONE
+        record.update(code=result.code, success=bool(done and verdict.success),
+                      outcome=_outcome_name(self.ExecuteCommand.Result, result.outcome),
                       sim_seconds=world.time - sim_started, wall_seconds=time.monotonic() - wall_started,
                       model_calls=result.model_calls, prompt_tokens=result.prompt_tokens,
                       completion_tokens=result.completion_tokens,
                       final_state={k: [round(float(v), 4) for v in p] for k, p in final.items()})
-        if not result.success:
-            record['reason'] = f'the program failed: {result.message}'
+        if not done:
+            record['reason'] = f'{_outcome_reason(self.ExecuteCommand.Result, result.outcome)}: {result.message}'
         elif not verdict.success:
             record['reason'] = f'the final state is wrong: {verdict.reason}'
         return record
@@ -231,6 +233,23 @@ class _EpisodeRunner:
         self.graph.close()
         self.node.destroy_node()
         self.context.try_shutdown()
+
+
+def _outcome_name(result_type: Any, outcome: int) -> str:
+    """'done', 'error', 'cancelled', 'refused' or 'model_error' for ExecuteCommand.Result.OUTCOME_* values."""
+    for name in dir(result_type):
+        if name.startswith('OUTCOME_') and getattr(result_type, name) == outcome:
+            return name[len('OUTCOME_'):].lower()
+    return f'unknown ({outcome})'
+
+
+_OUTCOME_REASONS = {'error': 'the program failed', 'cancelled': 'the command was cancelled',
+                    'refused': 'the command was refused', 'model_error': 'the model gave no usable answer'}
+
+
+def _outcome_reason(result_type: Any, outcome: int) -> str:
+    name = _outcome_name(result_type, outcome)
+    return _OUTCOME_REASONS.get(name, f'the command ended with outcome {name}')
 
 
 def _worker(index: int, keys: list[str], options: BenchOptions, cassette: str | None, results: str,
@@ -309,8 +328,8 @@ def _run_shards(shards, options, cassette, out_dir, show_progress, total, alread
     bar = None
     if show_progress:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-        bar = Progress(TextColumn('[bold]cap bench'), BarColumn(), MofNCompleteColumn(), TextColumn('{task.fields[ok]}'),
-                       TimeRemainingColumn())
+        bar = Progress(TextColumn('[bold]cap bench'), BarColumn(), MofNCompleteColumn(),
+                       TextColumn('{task.fields[ok]}'), TimeRemainingColumn())
         bar.start()
         task = bar.add_task('episodes', total=total, completed=already, ok='')
     interrupted = False

@@ -1,4 +1,7 @@
-"""One success checker per instruction template, on the simulator's final state (BENCHMARK.md definitions).
+"""One success checker per instruction template, on the simulator's final state.
+
+An episode succeeds when its final state meets the template's condition within the tolerances below (e.g. a block
+"in" a bowl lies within NEAR_PLACE of its centre; objects the instruction does not name moved less than UNTOUCHED).
 
 Positions are world-frame (x, y, z) in metres; distances are in the table plane unless stated. Every failure comes
 with a reason a developer can act on, naming the object and the measured distance.

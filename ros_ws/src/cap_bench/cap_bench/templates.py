@@ -1,4 +1,8 @@
-"""The benchmark's instruction templates, attribute pools and groups (BENCHMARK.md).
+"""The benchmark's instruction templates, attribute pools and groups.
+
+Three groups as in the Code as Policies table-top evaluation: SA-SI (seen attributes, seen instructions), UA-SI
+(unseen attributes, seen instructions) and UA-UI (unseen attributes, unseen instructions). Seen attribute values
+may appear in prompts; unseen ones never do.
 
 A template names the attributes it needs; `render` turns a template and its attribute values into the
 instruction a person would type.

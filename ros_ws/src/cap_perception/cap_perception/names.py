@@ -1,23 +1,9 @@
-"""Object names as people type them, mapped to the canonical "<colour> <category>" form, and the colour palette."""
+"""Object names as people type them, mapped to the canonical "<colour> <category>" form."""
 from __future__ import annotations
 
 import difflib
 import re
 from typing import Iterable
-
-# The ten colours of the table-top scene, RGB 0-255 (the paper's palette).
-PALETTE: dict[str, tuple[int, int, int]] = {
-    'blue': (78, 121, 167),
-    'red': (255, 87, 89),
-    'green': (89, 169, 79),
-    'orange': (242, 142, 43),
-    'yellow': (237, 201, 72),
-    'purple': (176, 122, 161),
-    'pink': (255, 157, 167),
-    'cyan': (118, 183, 178),
-    'brown': (156, 117, 95),
-    'gray': (186, 176, 172),
-}
 
 _ARTICLES = {'the', 'a', 'an'}
 _SPELLINGS = {'grey': 'gray', 'blocks': 'block', 'bowls': 'bowl', 'cube': 'block', 'cubes': 'block'}

@@ -3,9 +3,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from cap_perception.names import PALETTE, canonical_name
+from cap_tabletop.objects import CATEGORIES
+from cap_tabletop.palette import PALETTE, rgba
 
-CATEGORIES = ('block', 'bowl')
+from cap_perception.names import canonical_name
 
 
 @dataclass(frozen=True)
@@ -33,7 +34,6 @@ class PerceivedObject:
         half = tuple(float(s) / 2.0 for s in size)
         if len(centre) != 3 or len(half) != 3:
             raise ValueError('position and size need three values each (x, y, z)')
-        red, green, blue = PALETTE[color_name]
         return PerceivedObject(
             name=canonical_name(f'{color_name} {category}'),
             category=category,
@@ -42,5 +42,5 @@ class PerceivedObject:
             bbox_min=tuple(c - h for c, h in zip(centre, half)),
             bbox_max=tuple(c + h for c, h in zip(centre, half)),
             visible=visible,
-            color_rgba=(red / 255.0, green / 255.0, blue / 255.0, 1.0),
+            color_rgba=rgba(color_name),
         )

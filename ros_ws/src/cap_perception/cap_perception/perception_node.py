@@ -9,7 +9,6 @@ import threading
 
 import numpy as np
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
@@ -21,12 +20,13 @@ from std_srvs.srv import Trigger
 
 from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import GetObjectNames, GetObjectState
+from cap_ros_common.parameters import declare_config
+from cap_ros_common.time import time_msg, to_seconds
+from cap_perception.config import PerceptionConfig
 from cap_perception.rgbd_detector import CameraView, DetectorConfig, detect
-from cap_perception.ros_conversions import from_msg, image_to_array, time_msg, to_msg
+from cap_perception.ros_conversions import from_msg, image_to_array, to_msg
 from cap_perception.sources import (CameraMemory, NoObservationError, SnapshotSource, UnknownObjectError,
                                     load_stub_objects)
-
-SOURCES = ('ground_truth', 'rgbd', 'stub')
 
 # Only the latest object array matters: keep one, reliably delivered.
 OBJECTS_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
@@ -39,25 +39,16 @@ def _pose_matrix(position, orientation_xyzw) -> np.ndarray:
     return pose
 
 
-def _stamp_seconds(header) -> float:
-    return header.stamp.sec + header.stamp.nanosec * 1e-9
-
-
 class PerceptionNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('perception_node', **kwargs)
         self._memory: CameraMemory | None = None  # the RGB-D source's frame bookkeeping
-        source = self._parameter('source', 'ground_truth',
-                                 'Where objects come from: ground_truth (simulator object array), rgbd (colour '
-                                 'detector on camera images) or stub (YAML file).')
-        stub_file = self._parameter('stub_file', '', 'YAML file of objects for source=stub.')
-        if source not in SOURCES:
-            raise ValueError(f'parameter source={source!r} is not one of {", ".join(SOURCES)}')
+        self.config = config = declare_config(self, PerceptionConfig)
+        config.validate()
+        source, stub_file = config.source, config.stub_file
         self.source = SnapshotSource({'ground_truth': 'the simulator ground truth',
                                       'rgbd': 'the RGB-D detector', 'stub': f'the stub file {stub_file!r}'}[source])
         if source == 'stub':
-            if not stub_file:
-                raise ValueError('parameter stub_file is required when source=stub')
             self.source.update(load_stub_objects(stub_file), stamp=0.0)
         elif source == 'ground_truth':
             self.create_subscription(ObjectArray, GraphNames.SIM_OBJECTS_TOPIC, self._on_objects, OBJECTS_QOS)
@@ -73,25 +64,15 @@ class PerceptionNode(Node):
         self._stub_objects = self.source.objects() if source == 'stub' else None
         self.get_logger().info(f'serving objects from {self.source.description}')
 
-    def _parameter(self, name: str, default, description: str):
-        return self.declare_parameter(name, default, ParameterDescriptor(description=description)).value
-
     # ------------------------------------------------------------------------------------------ ground truth
     def _on_objects(self, msg: ObjectArray) -> None:
-        self.source.update((from_msg(obj) for obj in msg.objects), _stamp_seconds(msg.header))
+        self.source.update((from_msg(obj) for obj in msg.objects), to_seconds(msg.header.stamp))
 
     # ------------------------------------------------------------------------------------------ RGB-D detector
     def _start_detector(self) -> None:
-        camera = self._parameter('camera', 'top', 'Camera whose images the detector reads '
-                                 '(topics <camera namespace>/<camera>/{color,depth,camera_info,pose}).')
-        use_pose_topic = self._parameter('camera_pose_from_topic', True, 'Take the camera pose from the latched '
-                                         '<camera>/pose topic (the sim bridge publishes it); false: use the '
-                                         'camera_position and camera_orientation parameters.')
-        position = self._parameter('camera_position', [0.0, -0.5, 0.85],
-                                   'Camera optical frame origin in the world frame [m] (extrinsic calibration).')
-        orientation = self._parameter('camera_orientation', [1.0, 0.0, 0.0, 0.0],
-                                      'Camera optical frame orientation in the world frame, quaternion x, y, z, w '
-                                      '(ROS optical convention: +z forward, +y down).')
+        config = self.config
+        camera, use_pose_topic = config.camera, config.camera_pose_from_topic
+        position, orientation = config.camera_position, config.camera_orientation
         self._world_from_optical = None if use_pose_topic else _pose_matrix(position, orientation)
         self._detector_config = DetectorConfig()
         self._memory = CameraMemory(self.source)
@@ -135,7 +116,7 @@ class PerceptionNode(Node):
         if (color is None or depth is None or self._camera_matrix is None or self._world_from_optical is None
                 or color.header.stamp != depth.header.stamp):
             return
-        stamp = _stamp_seconds(color.header)
+        stamp = to_seconds(color.header.stamp)
         token = self._memory.begin(stamp, received_ns or None)
         if token is None:
             return

@@ -20,16 +20,19 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from cap_perception.names import PALETTE
+from cap_tabletop.objects import BLOCK_SIZE, BOWL_RIM_RADIUS
+from cap_tabletop.palette import PALETTE
+from cap_tabletop.workspace import TABLE_X_RANGE, TABLE_Y_RANGE
+
 from cap_perception.objects import PerceivedObject
 
 
 @dataclass(frozen=True)
 class DetectorConfig:
-    block_size: float = 0.04  # cube edge [m]
-    bowl_diameter: float = 0.13  # across the rim [m]
-    table_x: tuple[float, float] = (-0.3, 0.3)
-    table_y: tuple[float, float] = (-0.8, -0.2)
+    block_size: float = BLOCK_SIZE  # cube edge [m]
+    bowl_diameter: float = 2 * BOWL_RIM_RADIUS  # across the rim [m]
+    table_x: tuple[float, float] = TABLE_X_RANGE
+    table_y: tuple[float, float] = TABLE_Y_RANGE
     min_height: float = 0.004  # above the table surface [m]; lower points are table
     max_height: float = 0.22  # higher points are the robot (the tool travels at 0.25), not objects [m]
     max_color_distance: float = 0.22  # in normalised-RGB units; farther pixels are not an object colour

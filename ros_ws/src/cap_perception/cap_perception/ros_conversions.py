@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import numpy as np
-from builtin_interfaces.msg import Time
 from cap_interfaces.msg import ObjectState
 from geometry_msgs.msg import Point, Quaternion
 from std_msgs.msg import ColorRGBA
@@ -37,7 +36,7 @@ def from_msg(msg: ObjectState) -> PerceivedObject:
 
 
 def image_to_array(msg) -> np.ndarray:
-    """sensor_msgs/Image -> NumPy: rgb8/bgr8/rgba8 as (H, W, 3) RGB uint8; 32FC1 as metres; 16UC1 as millimetres -> metres."""
+    """sensor_msgs/Image -> NumPy: rgb8/bgr8/rgba8 as (H, W, 3) RGB uint8; 32FC1 as metres; 16UC1 (mm) as metres."""
     encoding = msg.encoding.lower()
     if encoding in ('rgb8', 'bgr8', 'rgba8', 'bgra8'):
         channels = 4 if encoding.endswith('a8') else 3
@@ -51,9 +50,3 @@ def image_to_array(msg) -> np.ndarray:
         image = rows[:, :msg.width * dtype.itemsize].copy().view(dtype).reshape(msg.height, msg.width)
         return image.astype(np.float32) / (1000.0 if encoding == '16uc1' else 1.0)
     raise ValueError(f'unsupported image encoding {msg.encoding!r}; expected rgb8, bgr8, 32FC1 or 16UC1')
-
-
-def time_msg(seconds: float) -> Time:
-    """Seconds as a builtin_interfaces/Time (whole nanoseconds, so the fraction never rounds up to a second)."""
-    nanoseconds = int(round(seconds * 1e9))
-    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)

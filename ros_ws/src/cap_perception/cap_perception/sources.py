@@ -12,6 +12,7 @@ import time
 from typing import Callable, Iterable, Sequence
 
 import yaml
+from cap_tabletop.objects import BLOCK_SIZE
 
 from cap_perception.names import UnknownObjectError, resolve_name
 from cap_perception.objects import PerceivedObject
@@ -168,7 +169,7 @@ def load_stub_objects(path: str | pathlib.Path) -> list[PerceivedObject]:
         try:
             objects.append(PerceivedObject.from_fields(
                 color_name=entry['color'], category=entry['category'], position=entry['position'],
-                size=entry.get('size', (0.04, 0.04, 0.04)), visible=bool(entry.get('visible', True))))
+                size=entry.get('size', (BLOCK_SIZE,) * 3), visible=bool(entry.get('visible', True))))
         except (KeyError, TypeError, ValueError) as error:
             raise ValueError(f'{path}: object #{index + 1} is invalid: {error}') from error
     names = [obj.name for obj in objects]
@@ -178,4 +179,5 @@ def load_stub_objects(path: str | pathlib.Path) -> list[PerceivedObject]:
     return objects
 
 
-__all__ = ['CameraMemory', 'NoObservationError', 'SnapshotSource', 'UnknownObjectError', 'load_stub_objects', 'remember_unseen']
+__all__ = ['CameraMemory', 'NoObservationError', 'SnapshotSource', 'UnknownObjectError', 'load_stub_objects',
+           'remember_unseen']

@@ -1,10 +1,12 @@
-"""sim_bridge: the MuJoCo table-top world on ROS 2, standing in for the robot driver and the cameras.
+"""sim_bridge: the MuJoCo world (a registered scene, by default the table top) on ROS 2, standing in for the robot
+driver and the cameras.
 
 Publishes /clock (simulated time), /joint_states, the ground-truth object array, and per camera
 <CAMERA_NAMESPACE>/<camera>/{color, depth, camera_info, pose}; serves the scene reset, a FollowJointTrajectory
 action and a GripperCommand action. Like a robot driver it does not listen to /cap/stop: the motion owners
-(cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it stopped. The physics runs in a thread of its own (never on an executor thread); the
-callbacks, which may block while a motion runs, need a MultiThreadedExecutor with a few threads (main() uses 8).
+(cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it stopped. The physics
+runs in a thread of its own (never on an executor thread); the callbacks, which may block while a motion runs, need
+a MultiThreadedExecutor with a few threads (main() uses 8). Parameters: SimBridgeConfig (cap_sim_bridge.config).
 
 QoS, chosen on purpose:
 - /clock, /joint_states: reliable, keep last 10 (the defaults robot_state_publisher and sim-time users expect;
@@ -22,7 +24,6 @@ import time
 
 import numpy as np
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
@@ -36,11 +37,14 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 from cap_interfaces.action import FollowJointTrajectory, GripperCommand
 from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import ResetScene
+from cap_ros_common.parameters import declare_config
+from cap_ros_common.time import duration_msg, time_msg
 from cap_sim_bridge import ros_conversions as conv
 from cap_sim_bridge import trajectory_goal
 from cap_sim_bridge.pacing import Pacer
+from cap_sim_bridge.config import SimBridgeConfig, cameras_to_publish
 from cap_sim_bridge.scene import ObjectSpec
-from cap_sim_bridge.world import ARM_JOINT_NAMES, CAMERA_NAMES, GRIPPER_JOINT_NAMES, TabletopWorld
+from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES, TabletopWorld
 
 STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 IMAGE_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
@@ -63,38 +67,23 @@ def camera_topic(camera: str, kind: str) -> str:
 class SimBridgeNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('sim_bridge', **kwargs)
-        scene_name = self._parameter('scene', 'tabletop', 'Scene loaded at start and by resets with no scene name.')
-        seed = self._parameter('seed', 0, 'Seed of the scene loaded at start.')
-        objects = self._parameter('objects', '', 'Objects of the scene loaded at start, comma-separated names '
-                                  '("red block, blue bowl"); empty = the default episode of the seed.')
-        real_time = self._parameter('real_time', True, 'true: simulated time follows the wall clock (times '
-                                    'real_time_factor); false: simulate as fast as possible.')
-        self._real_time_factor = self._parameter('real_time_factor', 1.0, 'Simulated seconds per wall second '
-                                                 'when real_time is true.') if real_time else 0.0
-        self._state_rate = self._parameter('state_rate', 100.0, 'Rate of /clock and /joint_states [Hz of '
-                                           'simulated time].')
-        self._objects_rate = self._parameter('objects_rate', 10.0, 'Rate of the ground-truth object array '
-                                             '[Hz of simulated time].')
-        self._camera_rate = self._parameter('camera_rate', 10.0, 'Rate of camera images [Hz of simulated time]; '
-                                            '0 = no images.')
-        self._cameras = self._parameter('cameras', list(CAMERA_NAMES), 'Cameras to publish.')
-        self._image_width = self._parameter('image_width', 640, 'Width of the published images [pixels].')
-        self._image_height = self._parameter('image_height', 480, 'Height of the published images [pixels].')
-        self._publish_depth = self._parameter('publish_depth', True, 'Publish depth images (32FC1, metres).')
-        self._goal_tolerance = self._parameter('goal_tolerance', trajectory_goal.DEFAULT_GOAL_TOLERANCE,
-                                               'Default per-joint goal tolerance of trajectories [rad].')
-        self._goal_time_tolerance = self._parameter('goal_time_tolerance',
-                                                    trajectory_goal.DEFAULT_GOAL_TIME_TOLERANCE,
-                                                    'Default time after a trajectory\'s end to meet the goal '
-                                                    'tolerance [s].')
-        self._gripper_timeout = self._parameter('gripper_timeout', 5.0, 'Longest gripper motion [s of simulated '
-                                                'time].')
-        unknown = [c for c in self._cameras if c not in CAMERA_NAMES]
-        if unknown:
-            raise ValueError(f'unknown cameras {unknown}; the scene has {list(CAMERA_NAMES)}')
+        config = declare_config(self, SimBridgeConfig)
+        self.config = config
+        self._real_time_factor = config.real_time_factor if config.real_time else 0.0
+        self._state_rate = config.state_rate
+        self._objects_rate = config.objects_rate
+        self._camera_rate = config.camera_rate
+        self._image_width = config.image_width
+        self._image_height = config.image_height
+        self._publish_depth = config.publish_depth
+        self._goal_tolerance = config.goal_tolerance
+        self._goal_time_tolerance = config.goal_time_tolerance
+        self._gripper_timeout = config.gripper_timeout
+        scene_name, seed = config.scene, config.seed
 
-        names = [n for n in (part.strip() for part in objects.split(',')) if n]
+        names = [n for n in (part.strip() for part in config.objects.split(',')) if n]
         self.world = TabletopWorld(scene_name, seed, [ObjectSpec.from_name(n) for n in names] or None)
+        self._cameras = cameras_to_publish(config.cameras, self.world.scene.camera_names, self.world.camera_names)
 
         self._clock_pub = self.create_publisher(Clock, GraphNames.CLOCK_TOPIC, STATE_QOS)
         self._joint_pub = self.create_publisher(JointState, GraphNames.JOINT_STATES_TOPIC, STATE_QOS)
@@ -126,8 +115,6 @@ class SimBridgeNode(Node):
         mode = f'{self._real_time_factor:g}x real time' if self._real_time_factor > 0 else 'as fast as possible'
         self.get_logger().info(f'simulating scene "{scene_name}" seed {seed} {mode}; cameras {self._cameras}')
 
-    def _parameter(self, name: str, default, description: str):
-        return self.declare_parameter(name, default, ParameterDescriptor(description=description)).value
 
     def destroy_node(self) -> None:
         self._stop.set()
@@ -158,7 +145,7 @@ class SimBridgeNode(Node):
                     objects = world.object_states() if now >= next_objects and \
                         wall - last_objects_wall >= 1.0 / MAX_WALL_OBJECTS_RATE else None
                 if joints is not None:
-                    self._clock_pub.publish(Clock(clock=conv.time_msg(now)))
+                    self._clock_pub.publish(Clock(clock=time_msg(now)))
                     self._joint_pub.publish(joints)
                     last_state_wall = wall
                 if objects is not None:
@@ -289,7 +276,7 @@ class SimBridgeNode(Node):
 
     @staticmethod
     def _trajectory_feedback(now, elapsed, desired, desired_velocities, positions, velocities):
-        duration = conv.duration_msg(elapsed)
+        duration = duration_msg(elapsed)
         feedback = FollowJointTrajectory.Feedback(header=conv.header(now), joint_names=list(ARM_JOINT_NAMES))
         feedback.desired = JointTrajectoryPoint(positions=desired.tolist(), velocities=desired_velocities.tolist(),
                                                 time_from_start=duration)

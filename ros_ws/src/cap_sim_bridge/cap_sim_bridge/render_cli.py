@@ -19,7 +19,8 @@ import numpy as np  # noqa: E402
 
 from cap_sim_bridge.rendering import QUALITIES  # noqa: E402
 from cap_sim_bridge.scene import ObjectSpec  # noqa: E402
-from cap_sim_bridge.world import CAMERA_NAMES, TabletopWorld  # noqa: E402
+from cap_sim_bridge.world import TabletopWorld
+from cap_tabletop.cameras import CAMERA_NAMES  # noqa: E402
 
 
 def depth_to_colour(depth: np.ndarray, near: float | None = None, far: float | None = None) -> np.ndarray:

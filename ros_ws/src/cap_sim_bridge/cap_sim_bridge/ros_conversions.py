@@ -4,7 +4,6 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
-from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point, PoseStamped, Quaternion
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -12,6 +11,7 @@ from std_msgs.msg import ColorRGBA, Header
 
 from cap_interfaces.msg import ObjectSpec as ObjectSpecMsg
 from cap_interfaces.msg import ObjectState as ObjectStateMsg
+from cap_ros_common.time import time_msg
 from cap_sim_bridge.camera import CameraIntrinsics
 from cap_sim_bridge.scene import ObjectSpec
 from cap_sim_bridge.world import ObjectState
@@ -21,20 +21,6 @@ WORLD_FRAME = 'world'
 
 def optical_frame_id(camera: str) -> str:
     return f'{camera}_optical_frame'
-
-
-def time_msg(seconds: float) -> Time:
-    nanoseconds = int(round(seconds * 1e9))
-    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
-
-
-def duration_msg(seconds: float) -> Duration:
-    stamp = time_msg(seconds)
-    return Duration(sec=stamp.sec, nanosec=stamp.nanosec)
-
-
-def duration_seconds(duration: Duration) -> float:
-    return duration.sec + duration.nanosec * 1e-9
 
 
 def header(seconds: float, frame_id: str = WORLD_FRAME) -> Header:

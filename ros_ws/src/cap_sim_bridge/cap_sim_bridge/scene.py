@@ -1,59 +1,28 @@
-"""The table-top scene: its facts (table, colours, object sizes, spawn rules) and how a MuJoCo model is built from it.
+"""Objects of a scene and how they become MuJoCo bodies: the object spec, the seed's default episode, spawn sampling.
 
-The robot, table and cameras come from the MJCF files in ``models/``; blocks and bowls are added here with
-MjSpec, one free body per object, named exactly as the object ("red block", "blue bowl").
+Blocks and bowls are added to a scene's MjSpec here, one free body per object, named exactly as the object
+("red block", "blue bowl"); their sizes and colours are the table-top facts of cap_tabletop. Which scenes exist
+(and the fixed part of each: robot, table, cameras) is cap_sim_bridge.scenes.
 """
 from __future__ import annotations
 
 import dataclasses
 import math
-import pathlib
 from typing import Iterable, Sequence
 
 import mujoco
 import numpy as np
+from cap_tabletop.objects import (BOWL_BOTTOM_RADIUS, BOWL_BOTTOM_THICKNESS, BOWL_WALL_HEIGHT, BOWL_WALL_SEGMENTS,
+                                  BOWL_WALL_THICKNESS, BOWL_WALL_TILT, BLOCK_SIZE, CATEGORIES, CATEGORY_BLOCK,
+                                  CATEGORY_BOWL, resting_height)
+from cap_tabletop.palette import PALETTE, rgba
+from cap_tabletop.workspace import SPAWN_MIN_SEPARATION, SPAWN_X_RANGE, SPAWN_Y_RANGE
 
-MODELS_DIR = pathlib.Path(__file__).resolve().parent / 'models'
-SCENE_FILES = {'tabletop': MODELS_DIR / 'tabletop.xml'}
-DEFAULT_SCENE = 'tabletop'
+__all__ = ['ObjectSpec', 'add_objects', 'default_objects', 'resting_height', 'rgba', 'sample_spawn_positions']
 
-# Table-top surface (z = 0) and spawn rules, world frame [m] (BENCHMARK.md).
-TABLE_X = (-0.3, 0.3)
-TABLE_Y = (-0.8, -0.2)
-SPAWN_X = (-0.2, 0.2)
-SPAWN_Y = (-0.7, -0.3)
-MIN_SEPARATION = 0.15
-
-# The ten colours of the benchmark, RGB 0-255.
-COLORS: dict[str, tuple[int, int, int]] = {
-    'blue': (78, 121, 167),
-    'red': (255, 87, 89),
-    'green': (89, 169, 79),
-    'orange': (242, 142, 43),
-    'yellow': (237, 201, 72),
-    'purple': (176, 122, 161),
-    'pink': (255, 157, 167),
-    'cyan': (118, 183, 178),
-    'brown': (156, 117, 95),
-    'gray': (186, 176, 172),
-}
-CATEGORY_BLOCK = 'block'
-CATEGORY_BOWL = 'bowl'
-CATEGORIES = (CATEGORY_BLOCK, CATEGORY_BOWL)
-
-BLOCK_SIZE = 0.04  # edge of the cube [m]
+# Bodies added per object, physical properties the table-top facts leave to the simulator.
 BLOCK_MASS = 0.01  # [kg]
-# Bowl: a flat disc bottom and a ring of outward-tilted wall slabs; about 13 cm across the rim, 4 cm deep.
-BOWL_BOTTOM_RADIUS = 0.05
-BOWL_BOTTOM_THICKNESS = 0.006
-BOWL_WALL_HEIGHT = 0.034
-BOWL_WALL_TILT = math.radians(25.0)
-BOWL_WALL_THICKNESS = 0.004
-BOWL_WALL_SEGMENTS = 12
 BOWL_MASS = 0.15  # [kg]; heavy enough that a dropped block does not tip it
-BOWL_RIM_RADIUS = (BOWL_BOTTOM_RADIUS + BOWL_WALL_HEIGHT * math.tan(BOWL_WALL_TILT) + BOWL_WALL_THICKNESS)
-# Inside a bowl: horizontal distance from its centre at which a block still rests on the bottom.
-BOWL_INNER_RADIUS = BOWL_BOTTOM_RADIUS
 
 # Objects start this far above their resting height so that no contact starts in penetration.
 SPAWN_CLEARANCE = 0.002
@@ -81,27 +50,16 @@ class ObjectSpec:
     def validate(self) -> None:
         if self.category not in CATEGORIES:
             raise ValueError(f'unknown category {self.category!r} of {self.name!r}; known: {", ".join(CATEGORIES)}')
-        if self.color_name not in COLORS:
-            raise ValueError(f'unknown colour {self.color_name!r} of {self.name!r}; known: {", ".join(COLORS)}')
+        if self.color_name not in PALETTE:
+            raise ValueError(f'unknown colour {self.color_name!r} of {self.name!r}; known: {", ".join(PALETTE)}')
         if not self.name:
             raise ValueError('an object needs a name')
-
-
-def rgba(color_name: str) -> tuple[float, float, float, float]:
-    """The palette colour as RGBA in [0, 1]."""
-    r, g, b = COLORS[color_name]
-    return (r / 255.0, g / 255.0, b / 255.0, 1.0)
-
-
-def resting_height(category: str) -> float:
-    """z of the object's body origin when it rests on the table: cube centre, bowl bottom."""
-    return BLOCK_SIZE / 2 if category == CATEGORY_BLOCK else 0.0
 
 
 def default_objects(seed: int) -> list[ObjectSpec]:
     """The scene's default episode for a seed: 3-4 blocks and 3-4 bowls of distinct colours (per category)."""
     rng = np.random.default_rng([seed, 1])
-    names = list(COLORS)
+    names = list(PALETTE)
     specs = []
     for category in (CATEGORY_BLOCK, CATEGORY_BOWL):
         count = int(rng.integers(3, 5))
@@ -110,8 +68,9 @@ def default_objects(seed: int) -> list[ObjectSpec]:
     return specs
 
 
-def sample_spawn_positions(specs: Sequence[ObjectSpec], seed: int, x_range: tuple[float, float] = SPAWN_X,
-                           y_range: tuple[float, float] = SPAWN_Y, min_separation: float = MIN_SEPARATION,
+def sample_spawn_positions(specs: Sequence[ObjectSpec], seed: int, x_range: tuple[float, float] = SPAWN_X_RANGE,
+                           y_range: tuple[float, float] = SPAWN_Y_RANGE,
+                           min_separation: float = SPAWN_MIN_SEPARATION,
                            max_restarts: int = 200) -> list[tuple[float, float]]:
     """xy for every spec: given ones kept, the others drawn uniformly in the spawn region, pairwise apart.
 
@@ -136,11 +95,8 @@ def sample_spawn_positions(specs: Sequence[ObjectSpec], seed: int, x_range: tupl
     raise ValueError(f'no layout of {len(specs)} objects at least {min_separation} m apart fits the spawn region')
 
 
-def build_model(objects: Iterable[ObjectSpec], scene: str = DEFAULT_SCENE) -> mujoco.MjModel:
-    """Compile the scene with one free body per object (body and free joint named after the object)."""
-    if scene not in SCENE_FILES:
-        raise ValueError(f'unknown scene {scene!r}; known: {", ".join(SCENE_FILES)}')
-    spec = mujoco.MjSpec.from_file(str(SCENE_FILES[scene]))
+def add_objects(spec: mujoco.MjSpec, objects: Iterable[ObjectSpec]) -> mujoco.MjSpec:
+    """Add one free body per object to `spec` (body and free joint named after the object); returns `spec`."""
     for obj in objects:
         obj.validate()
         body = spec.worldbody.add_body(name=obj.name, pos=[0.0, 0.0, resting_height(obj.category)])
@@ -149,7 +105,7 @@ def build_model(objects: Iterable[ObjectSpec], scene: str = DEFAULT_SCENE) -> mu
             _add_block_geoms(body, obj)
         else:
             _add_bowl_geoms(body, obj)
-    return spec.compile()
+    return spec
 
 
 def _object_geom(body: mujoco.MjsBody, obj: ObjectSpec, **kwargs) -> mujoco.MjsGeom:

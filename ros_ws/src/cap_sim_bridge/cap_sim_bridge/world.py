@@ -1,4 +1,5 @@
-"""The simulated table-top world: a UR5e with a parallel-jaw gripper, a table, blocks and bowls (no ROS here).
+"""The simulated world: a UR5e with a parallel-jaw gripper in a registered scene (by default the table top with its
+blocks and bowls; see cap_sim_bridge.scenes). No ROS here.
 
 Typical use::
 
@@ -27,7 +28,7 @@ import mujoco
 import numpy as np
 
 from cap_sim_bridge import camera as camera_math
-from cap_sim_bridge import scene
+from cap_sim_bridge import scene, scenes
 from cap_sim_bridge.rendering import RgbdRenderer
 from cap_sim_bridge.scene import ObjectSpec
 from cap_sim_bridge.trajectory import JointTrajectory
@@ -37,7 +38,6 @@ ARM_JOINT_NAMES = ('shoulder_pan_joint', 'shoulder_lift_joint', 'elbow_joint', '
 GRIPPER_JOINT_NAMES = ('gripper_left_finger_joint', 'gripper_right_finger_joint')
 GRIPPER_ACTUATOR = 'gripper'
 GRIPPER_TENDON = 'gripper_opening'
-CAMERA_NAMES = ('front', 'top')
 TCP_SITE = 'tcp'
 FLANGE_SITE = 'flange'
 TCP_OFFSET = 0.15  # tcp distance along the flange's +z [m]
@@ -84,10 +84,12 @@ class GripperState:
 class TabletopWorld:
     """The table-top simulation. See the module docstring for the threading rule."""
 
-    def __init__(self, scene_name: str = scene.DEFAULT_SCENE, seed: int = 0,
+    def __init__(self, scene_name: str = scenes.DEFAULT_SCENE, seed: int = 0,
                  objects: Sequence[ObjectSpec | str] | None = None) -> None:
+        """scene_name: a registered scene (ValueError naming the known ones otherwise); it must contain the robot."""
         self.lock = threading.RLock()
         self.scene_name = scene_name
+        self.scene = scenes.get_scene(scene_name)
         self._models: dict[tuple, mujoco.MjModel] = {}
         self._renderers: dict[tuple[int, int, int, str], RgbdRenderer] = {}
         self.model: mujoco.MjModel | None = None
@@ -107,19 +109,19 @@ class TabletopWorld:
         object states. Raises ValueError for unknown colours or categories, duplicate names, or impossible layouts.
         """
         specs = [ObjectSpec.from_name(o) if isinstance(o, str) else o for o in objects] if objects else \
-            scene.default_objects(seed)
+            self.scene.default_objects(seed)
         for spec in specs:
             spec.validate()
         names = [spec.name for spec in specs]
         if len(set(names)) != len(names):
             raise ValueError(f'object names must be unique: {names}')
-        positions = scene.sample_spawn_positions(specs, seed)
+        positions = self.scene.spawn_positions(specs, seed)
         key = (self.scene_name, tuple((s.name, s.category, s.color_name) for s in specs))
         with self.lock:
             previous_time = 0.0 if self.data is None else float(self.data.time)
             model = self._models.get(key)
             if model is None:
-                model = scene.build_model(specs, self.scene_name)
+                model = self.scene.build(specs).compile()
                 # A few compiled models are kept: benchmarks and tests reset the same objects again and again.
                 if len(self._models) >= 8:
                     self._models.pop(next(iter(self._models)))
@@ -127,7 +129,11 @@ class TabletopWorld:
             if model is not self.model:
                 self.model = model
                 self.data = mujoco.MjData(model)
-                self._index_model()
+                try:
+                    self._index_model()
+                except KeyError as error:
+                    raise ValueError(f'scene {self.scene_name!r} lacks part of the UR5e and gripper the world drives '
+                                     f'({error}); include {scenes.ROBOT_MJCF} in it') from None
             else:
                 mujoco.mj_resetData(self.model, self.data)
             self.objects = specs
@@ -403,7 +409,9 @@ class TabletopWorld:
         """
         with self.lock:
             model, data = self.model, self.data
-            others = [model.geom('table').id] + [int(g) for ids in self._object_geom_ids.values() for g in ids]
+            table = [model.geom('table').id] if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, 'table') >= 0 \
+                else []
+            others = table + [int(g) for ids in self._object_geom_ids.values() for g in ids]
             deepest = (0.0, '', '')
             for name, geoms in self._object_geom_ids.items():
                 for geom in geoms:
@@ -417,6 +425,12 @@ class TabletopWorld:
             return deepest
 
     # ----------------------------------------------------------------------------------------------- cameras
+    @property
+    def camera_names(self) -> tuple[str, ...]:
+        """The cameras of the current model."""
+        with self.lock:
+            return tuple(self.model.camera(i).name for i in range(self.model.ncam))
+
     def camera_intrinsics(self, camera: str, width: int = 640, height: int = 480) -> camera_math.CameraIntrinsics:
         """Pinhole intrinsics of images rendered at width x height from the named camera."""
         with self.lock:

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 
 from cap_sim_bridge.render_cli import main
-from cap_sim_bridge.scene import COLORS
+from cap_tabletop.palette import PALETTE as COLORS
 
 
 def test_render_writes_one_png_per_camera_with_the_objects_colours(tmp_path, capsys):

@@ -2,8 +2,10 @@
 import numpy as np
 import pytest
 
-from cap_sim_bridge.scene import COLORS, ObjectSpec
-from cap_sim_bridge.world import CAMERA_NAMES, TabletopWorld
+from cap_sim_bridge.scene import ObjectSpec
+from cap_tabletop.palette import PALETTE as COLORS
+from cap_sim_bridge.world import TabletopWorld
+from cap_tabletop.cameras import CAMERA_NAMES
 
 BLOCKS = [ObjectSpec('red block', 'block', 'red', (-0.15, -0.35)),
           ObjectSpec('blue block', 'block', 'blue', (0.15, -0.65)),

@@ -8,6 +8,7 @@ import pytest
 
 from cap_sim_bridge import scene
 from cap_sim_bridge.scene import ObjectSpec
+from cap_tabletop import palette, workspace
 from cap_sim_bridge.world import ARM_JOINT_NAMES, TCP_OFFSET, TabletopWorld
 
 # Settled objects may drift a little from their sampled spot while contacts come to rest.
@@ -44,15 +45,16 @@ def test_200_seeds_spawn_by_the_rules_and_settle_on_the_table(world):
         assert 3 <= len(blocks) <= 4 and 3 <= len(bowls) <= 4, seed
         for state in states:
             x, y, _ = state.position
-            assert scene.SPAWN_X[0] - DRIFT <= x <= scene.SPAWN_X[1] + DRIFT, (seed, state)
-            assert scene.SPAWN_Y[0] - DRIFT <= y <= scene.SPAWN_Y[1] + DRIFT, (seed, state)
+            assert workspace.SPAWN_X_RANGE[0] - DRIFT <= x <= workspace.SPAWN_X_RANGE[1] + DRIFT, (seed, state)
+            assert workspace.SPAWN_Y_RANGE[0] - DRIFT <= y <= workspace.SPAWN_Y_RANGE[1] + DRIFT, (seed, state)
             # On the table: inside its bounds, resting on its surface, upright.
-            assert state.bbox_min[0] >= scene.TABLE_X[0] and state.bbox_max[0] <= scene.TABLE_X[1], (seed, state)
-            assert state.bbox_min[1] >= scene.TABLE_Y[0] and state.bbox_max[1] <= scene.TABLE_Y[1], (seed, state)
+            (x_min, x_max), (y_min, y_max) = workspace.TABLE_X_RANGE, workspace.TABLE_Y_RANGE
+            assert state.bbox_min[0] >= x_min and state.bbox_max[0] <= x_max, (seed, state)
+            assert state.bbox_min[1] >= y_min and state.bbox_max[1] <= y_max, (seed, state)
             assert abs(state.bbox_min[2]) < MAX_PENETRATION, (seed, state)
             assert state.orientation_xyzw[3] > 0.9999, (seed, state)
         for a, b in itertools.combinations(states, 2):
-            assert math.dist(a.position[:2], b.position[:2]) >= scene.MIN_SEPARATION - 2 * DRIFT, (seed, a, b)
+            assert math.dist(a.position[:2], b.position[:2]) >= workspace.SPAWN_MIN_SEPARATION - 2 * DRIFT, (seed, a, b)
         depth, geom_a, geom_b = world.deepest_object_penetration()
         assert depth < MAX_PENETRATION, (seed, geom_a, geom_b, depth)
         assert max(world.object_speeds().values()) < 1e-3, seed
@@ -86,7 +88,7 @@ def test_unknown_colours_categories_and_duplicates_are_refused_with_the_reason(w
 
 
 def test_impossible_layouts_are_refused():
-    specs = [ObjectSpec.from_name(f'{c} block') for c in scene.COLORS]
+    specs = [ObjectSpec.from_name(f'{c} block') for c in palette.PALETTE]
     with pytest.raises(ValueError, match='no layout'):
         scene.sample_spawn_positions(specs, 0, max_restarts=5)
 

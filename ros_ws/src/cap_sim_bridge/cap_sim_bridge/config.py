@@ -1,0 +1,48 @@
+"""Parameters of the sim_bridge node: the one home of their defaults (declared with declare_config)."""
+from __future__ import annotations
+
+import dataclasses
+
+from cap_ros_common.parameters import parameter
+from cap_tabletop.cameras import CAMERA_NAMES
+
+from cap_sim_bridge import trajectory_goal
+from cap_sim_bridge.scenes import DEFAULT_SCENE
+
+# The bridge publishes the scene's own cameras while `cameras` is left at this default.
+DEFAULT_CAMERAS = tuple(CAMERA_NAMES)
+
+
+@dataclasses.dataclass(frozen=True)
+class SimBridgeConfig:
+    scene: str = parameter(DEFAULT_SCENE, 'Registered scene loaded at start and by resets with no scene name.')
+    seed: int = parameter(0, 'Seed of the scene loaded at start.')
+    objects: str = parameter('', 'Objects of the scene loaded at start, comma-separated names '
+                                 '("red block, blue bowl"); empty = the default episode of the seed.')
+    real_time: bool = parameter(True, 'true: simulated time follows the wall clock (times real_time_factor); '
+                                      'false: simulate as fast as possible.')
+    real_time_factor: float = parameter(1.0, 'Simulated seconds per wall second when real_time is true.')
+    state_rate: float = parameter(100.0, 'Rate of /clock and /joint_states [Hz of simulated time].')
+    objects_rate: float = parameter(10.0, 'Rate of the ground-truth object array [Hz of simulated time].')
+    camera_rate: float = parameter(10.0, 'Rate of camera images [Hz of simulated time]; 0 = no images.')
+    cameras: tuple[str, ...] = parameter(DEFAULT_CAMERAS, 'Cameras to publish; left at the default, the cameras of '
+                                                          'the scene.')
+    image_width: int = parameter(640, 'Width of the published images [pixels].')
+    image_height: int = parameter(480, 'Height of the published images [pixels].')
+    publish_depth: bool = parameter(True, 'Publish depth images (32FC1, metres).')
+    goal_tolerance: float = parameter(trajectory_goal.DEFAULT_GOAL_TOLERANCE,
+                                      'Default per-joint goal tolerance of trajectories [rad].')
+    goal_time_tolerance: float = parameter(trajectory_goal.DEFAULT_GOAL_TIME_TOLERANCE,
+                                           "Default time after a trajectory's end to meet the goal tolerance [s].")
+    gripper_timeout: float = parameter(5.0, 'Longest gripper motion [s of simulated time].')
+
+
+def cameras_to_publish(requested: tuple[str, ...], scene_default: tuple[str, ...],
+                       in_model: tuple[str, ...]) -> list[str]:
+    """The requested cameras (the scene's default ones while the parameter is left at its default); ValueError for
+    cameras the scene's model lacks."""
+    cameras = list(scene_default) if tuple(requested) == DEFAULT_CAMERAS else list(requested)
+    unknown = [c for c in cameras if c not in in_model]
+    if unknown:
+        raise ValueError(f'unknown cameras {unknown}; the scene has {list(in_model)}')
+    return cameras

@@ -1,0 +1,121 @@
+"""The scenes the simulator knows, by name: a registry a domain adds its own scene to without editing this module.
+
+A scene is the fixed part of a MuJoCo model (the UR5e with its gripper, a table, cameras, lights) plus the rules of
+its episodes (which objects a seed gives, where they spawn). The world drives the robot of models/ur5e_gripper.xml,
+so every scene must contain it: an MJCF scene includes it with ``<include file="ur5e_gripper.xml"/>``
+(`spec_from_mjcf` resolves that include). Objects are added per reset as free bodies (`scene.add_objects`).
+
+Registering a scene::
+
+    from cap_sim_bridge.scenes import SceneSpec, mjcf_builder, register_scene
+    register_scene(SceneSpec('toy', build=mjcf_builder(TOY_MJCF), camera_names=('top',)))
+
+then ``TabletopWorld('toy', seed, objects)`` or the bridge node's ``scene`` parameter picks it.
+"""
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+import threading
+from typing import Callable, Sequence
+
+import mujoco
+from cap_tabletop import cameras as tabletop_cameras
+
+from cap_sim_bridge import scene as objects_module
+from cap_sim_bridge.scene import ObjectSpec
+
+MODELS_DIR = pathlib.Path(__file__).resolve().parent / 'models'
+ROBOT_MJCF = 'ur5e_gripper.xml'  # the arm and gripper every scene must contain, by this include file name
+TABLETOP = 'tabletop'
+DEFAULT_SCENE = TABLETOP
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneSpec:
+    """One scene. build(objects) returns the uncompiled model with those objects added (the world compiles it).
+
+    default_objects(seed): the objects of a reset that names none. spawn_positions(objects, seed): an (x, y) per
+    object (objects with a position keep it). camera_names: the cameras the bridge publishes by default.
+    """
+
+    name: str
+    build: Callable[[Sequence[ObjectSpec]], mujoco.MjSpec]
+    default_objects: Callable[[int], list[ObjectSpec]] = lambda seed: []
+    spawn_positions: Callable[[Sequence[ObjectSpec], int], list[tuple[float, float]]] = \
+        objects_module.sample_spawn_positions
+    camera_names: tuple[str, ...] = ()
+    description: str = ''
+
+
+def robot_include() -> dict[str, bytes]:
+    """The include files an MJCF scene may name: the robot, by ROBOT_MJCF."""
+    return {ROBOT_MJCF: (MODELS_DIR / ROBOT_MJCF).read_bytes()}
+
+
+def spec_from_mjcf(text: str) -> mujoco.MjSpec:
+    """An MjSpec from MJCF text that may ``<include file="ur5e_gripper.xml"/>``."""
+    return mujoco.MjSpec.from_string(text, include=robot_include())
+
+
+def mjcf_builder(text: str) -> Callable[[Sequence[ObjectSpec]], mujoco.MjSpec]:
+    """A SceneSpec.build for a scene given as MJCF text: the text plus one body per object (blocks and bowls)."""
+    def build(objects: Sequence[ObjectSpec]) -> mujoco.MjSpec:
+        return objects_module.add_objects(spec_from_mjcf(text), objects)
+    return build
+
+
+_registry: dict[str, SceneSpec] = {}
+_lock = threading.Lock()
+
+
+def register_scene(spec: SceneSpec, *, replace: bool = False) -> SceneSpec:
+    """Make `spec` known by its name. ValueError if another scene has that name (unless replace)."""
+    if not spec.name:
+        raise ValueError('a scene needs a name')
+    with _lock:
+        if spec.name in _registry and not replace and _registry[spec.name] is not spec:
+            raise ValueError(f'a scene named {spec.name!r} is already registered')
+        _registry[spec.name] = spec
+    return spec
+
+
+def unregister_scene(name: str) -> None:
+    """Forget a registered scene (tests that register a toy scene clean up with this)."""
+    with _lock:
+        _registry.pop(name, None)
+
+
+def get_scene(name: str) -> SceneSpec:
+    """The registered scene called `name`; ValueError naming the known scenes otherwise."""
+    with _lock:
+        spec = _registry.get(name)
+        if spec is None:
+            raise ValueError(f'unknown scene {name!r}; known scenes: {", ".join(sorted(_registry)) or "none"}')
+        return spec
+
+
+def scene_names() -> list[str]:
+    with _lock:
+        return sorted(_registry)
+
+
+def build_model(objects: Sequence[ObjectSpec], scene: str = DEFAULT_SCENE) -> mujoco.MjModel:
+    """Compile the named scene with one free body per object."""
+    return get_scene(scene).build(objects).compile()
+
+
+# ------------------------------------------------------------------------------------------- the table top
+def _build_tabletop(objects: Sequence[ObjectSpec]) -> mujoco.MjSpec:
+    spec = mujoco.MjSpec.from_file(str(MODELS_DIR / 'tabletop.xml'))
+    # The cameras' poses are table-top facts (perception and control use them too), so they are added here.
+    for camera in tabletop_cameras.CAMERAS.values():
+        spec.worldbody.add_camera(name=camera.name, pos=list(camera.position), quat=list(camera.orientation),
+                                  fovy=camera.fovy)
+    return objects_module.add_objects(spec, objects)
+
+
+register_scene(SceneSpec(TABLETOP, build=_build_tabletop, default_objects=objects_module.default_objects,
+                         spawn_positions=objects_module.sample_spawn_positions,
+                         camera_names=tabletop_cameras.CAMERA_NAMES,
+                         description='a table with blocks and bowls of the ten palette colours'))

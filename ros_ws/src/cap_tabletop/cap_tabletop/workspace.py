@@ -1,0 +1,37 @@
+"""Where things are on the table top (world frame, metres; "top" of the table is +y, "left" is -x).
+
+The robot stands at the world origin beside the table; the table's upper surface is the plane z = TABLE_Z over
+x in TABLE_X_RANGE, y in TABLE_Y_RANGE. Normalised table coordinates map [0, 0] to the bottom-left point
+NORMALISED_ORIGIN and [1, 1] to the top-right point NORMALISED_ORIGIN + NORMALISED_SPAN.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+TABLE_X_RANGE: tuple[float, float] = (-0.3, 0.3)
+TABLE_Y_RANGE: tuple[float, float] = (-0.8, -0.2)
+TABLE_Z = 0.0  # height of the table-top surface in the world frame [m]
+TABLE_CENTER: tuple[float, float] = (0.0, -0.5)
+
+NORMALISED_ORIGIN = np.array([-0.25, -0.75])
+NORMALISED_SPAN = np.array([0.5, 0.5])
+
+# Named positions on the table surface that the robot API of generated code knows.
+CORNERS: dict[str, tuple[float, float]] = {
+    'top left corner': (-0.25, -0.25), 'top right corner': (0.25, -0.25),
+    'bottom left corner': (-0.25, -0.75), 'bottom right corner': (0.25, -0.75),
+}
+SIDES: dict[str, tuple[float, float]] = {
+    'top side': (0.0, -0.25), 'bottom side': (0.0, -0.75), 'left side': (-0.25, -0.5), 'right side': (0.25, -0.5)}
+MIDDLE: tuple[float, float] = (0.0, -0.5)
+
+# Where objects spawn at reset, and how far apart their centres are at least.
+SPAWN_X_RANGE: tuple[float, float] = (-0.2, 0.2)
+SPAWN_Y_RANGE: tuple[float, float] = (-0.7, -0.3)
+SPAWN_MIN_SEPARATION = 0.15
+
+
+def on_table(x: float, y: float, margin: float = 0.0) -> bool:
+    """Whether (x, y) lies over the table top, at least `margin` inside its edges."""
+    return (TABLE_X_RANGE[0] + margin <= x <= TABLE_X_RANGE[1] - margin
+            and TABLE_Y_RANGE[0] + margin <= y <= TABLE_Y_RANGE[1] - margin)
