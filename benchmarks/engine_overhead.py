@@ -87,6 +87,7 @@ def summary(values: list[float]) -> dict[str, float]:
 def isolated_overhead_ms(path: Path, n: int, warmup: int) -> dict:
     """Overhead per command through IsolatedEngine: wall time of run() minus the model time the sandbox reports."""
     from cap_lmp.isolated_engine import IsolatedEngine
+    from cap_lmp_ros.domains.tabletop.lmps import build_engine
 
     current = {'table': Table.with_objects(SCENE)}
 
@@ -94,7 +95,7 @@ def isolated_overhead_ms(path: Path, n: int, warmup: int) -> dict:
         return lambda *args, **kwargs: getattr(current['table'], name)(*args, **kwargs)
 
     api = {name: bound(name) for name in current['table'].api()}
-    engine = IsolatedEngine(api, CassetteClient(path))
+    engine = IsolatedEngine(build_engine, api, CassetteClient(path))
     overhead_ms = []
     try:
         for i in range(warmup + n):

@@ -18,6 +18,7 @@ import numpy as np
 
 from cap_lmp.isolated_engine import KILL_MARGIN_S, IsolatedEngine
 from cap_lmp.llm import OpenAICompatibleClient
+from cap_lmp_ros.domains.tabletop.lmps import build_engine
 from cap_lmp.sandbox import SandboxLimits
 from cap_lmp.testing.attack_programs import MOVE, PROGRAMS, SCENE, TIME_ATTACKS
 from cap_lmp.testing.openai_server import ScriptedOpenAIServer, ScriptedReply
@@ -33,7 +34,8 @@ def main() -> None:
     table = Table.with_objects(SCENE)
     rows = {}
     with ScriptedOpenAIServer(PROGRAMS) as server:
-        engine = IsolatedEngine(table.api(), OpenAICompatibleClient(server.base_url, 'scripted-model', max_retries=0),
+        client = OpenAICompatibleClient(server.base_url, 'scripted-model', max_retries=0)
+        engine = IsolatedEngine(build_engine, table.api(), client,
                                 SandboxLimits(time_limit_s=options.time_limit), stall_limit_s=30.0,
                                 model_time_limit_s=MODEL_LIMIT_S)
         try:

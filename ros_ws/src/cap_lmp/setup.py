@@ -1,5 +1,3 @@
-from glob import glob
-
 from setuptools import find_packages, setup
 
 package_name = 'cap_lmp'
@@ -17,7 +15,8 @@ setup(
     zip_safe=False,
     maintainer='cap-ros maintainers',
     maintainer_email='maintainers@cap-ros.dev',
-    description='Language model programs (pure Python): the LMP engine, hierarchical function generation, LLM clients, cassettes and the sandbox.',
+    description=('Language model programs (pure Python): the LMP engine, hierarchical function generation, LLM '
+                 'clients, cassettes and the sandbox.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

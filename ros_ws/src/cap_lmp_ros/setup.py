@@ -18,7 +18,8 @@ setup(
     zip_safe=False,
     maintainer='cap-ros maintainers',
     maintainer_email='maintainers@cap-ros.dev',
-    description='The ROS binding of the LMP engine: lmp_node, its command queue, and the domain registry with the table-top domain (prompts, LMPs, robot API).',
+    description=('The ROS binding of the LMP engine: lmp_node, its command queue, and the domain registry with the '
+                 'table-top domain (prompts, LMPs, robot API).'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

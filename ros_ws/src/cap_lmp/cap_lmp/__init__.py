@@ -1,1 +1,2 @@
-"""Language model programs (pure Python): the LMP engine, hierarchical function generation, LLM clients, cassettes and the sandbox."""
+"""Language model programs (pure Python): the LMP engine, hierarchical function generation, LLM clients,
+cassettes and the sandbox."""

@@ -47,6 +47,7 @@ from typing import Any, Callable, Iterable, Mapping
 from cap_lmp.errors import CapLLMError, CodeRejected, ExecutionStopped, GenerationError
 from cap_lmp.functions import top_level_functions, undefined_calls
 from cap_lmp.llm import Completion, CompletionRequest, LLMClient
+from cap_lmp.outcome import Outcome, outcome_of
 from cap_lmp.sandbox import SANDBOX_FILE_PREFIX, CompiledProgram, Sandbox, SandboxLimits, bounded_exception_text
 from cap_lmp.wire import MAX_PROGRAM_CHARS
 
@@ -96,6 +97,7 @@ class CommandResult:
     success: bool
     code: str = ''
     message: str = ''
+    outcome: Outcome = Outcome.ERROR  # how it ended; DONE exactly when success
     error_type: str = ''
     error_line: int | None = None
     error_source: str | None = None
@@ -226,6 +228,9 @@ class Engine:
     def cancel(self) -> None:
         """Stop the running command at its next checkpoint (thread-safe; no effect when idle)."""
         self._cancel.set()
+
+    def close(self) -> None:
+        """Nothing to release in this process (IsolatedEngine ends its sandbox process here)."""
 
     def _emit(self, stage: str, lmp: str, code: str = '', message: str = '') -> None:
         event = EngineEvent(self._command_id, stage, lmp, code, message)
@@ -417,6 +422,7 @@ class Engine:
                 with self.sandbox.watching(self._cancel):  # one time limit for the whole program
                     self._execute(config, prepared, command, context)
                 result.success = True
+                result.outcome = Outcome.DONE
             except Exception as error:  # everything a generated program can cause ends here, reported
                 self._report_failure(result, error)
                 del error  # its traceback holds the program's frames and their memory
@@ -442,6 +448,7 @@ class Engine:
     def _report_failure(self, result: CommandResult, error: Exception) -> None:
         """Describe the failure; a message that cannot be built (a program's exception can carry anything) is
         replaced by its type, and the session goes on."""
+        result.outcome = outcome_of(error)
         try:
             self._describe_failure(result, error)
         except Exception:  # a MemoryError, an int too long for str(), ...: the report itself must not fail

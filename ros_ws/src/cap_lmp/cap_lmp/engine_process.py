@@ -1,13 +1,14 @@
 """The sandbox process: one session's Engine, scope and generated code, apart from lmp_node.
 
 Started by IsolatedEngine (isolated_engine.py) as `python -m cap_lmp.engine_process <data fd> <control fd>` with
-one end of two socket pairs. On the data socket, the first message is the setup (robot API names, sandbox limits,
-the model deadline, address-space limit); then the parent sends run / reset / close and the replies to the robot
-API calls and model requests this process makes, and this process sends engine events, API calls ('call'), model
-requests ('complete', the CompletionRequest's fields), the result of each run, and a heartbeat every HEARTBEAT_S
-while it can run Python. The main thread reads the data socket itself, also for the reply to a request (a hand-off
-between threads would cost about a millisecond per call). The control socket carries only cancel; a thread of its
-own watches it, and its closing means the parent is gone.
+one end of two socket pairs. On the data socket, the first message is the setup (the engine builder's module and
+name, robot API names, sandbox limits, engine options such as the model deadline, address-space limit); then the
+parent sends run / reset / close and the replies to the robot API calls and model requests this process makes, and
+this process sends engine events, API calls ('call'), model requests ('complete', the CompletionRequest's fields),
+the result of each run, and a heartbeat every HEARTBEAT_S while it can run Python. The main thread reads the data
+socket itself, also for the reply to a request (a hand-off between threads would cost about a millisecond per
+call). The control socket carries only cancel; a thread of its own watches it, and its closing means the parent is
+gone.
 
 No rclpy and no model client here: the robot and the model live in the parent, behind the `call` and `complete`
 messages, so this process needs no network, and the parent measures the model's time exactly (its reply carries
@@ -16,6 +17,7 @@ that time, which the watchdog excludes from the program's time, as the parent's 
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import itertools
 import os
 import resource
@@ -124,15 +126,14 @@ def _limit_address_space(extra_bytes: int) -> None:
 
 
 def _build_engine(setup: dict[str, Any], channel: _Channel):
+    """The session's Engine, from the builder the parent named ('module:function') over proxies of its API."""
     from cap_lmp.sandbox import SandboxLimits
-    from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
 
-    if setup.get('domain', 'tabletop') != 'tabletop':
-        raise ValueError(f"unknown domain {setup.get('domain')!r}")
+    module, _, name = str(setup['build_engine']).partition(':')
+    build_engine = getattr(importlib.import_module(module), name)
     limits = SandboxLimits(**setup.get('limits', {}))
     api = {name: _proxy(channel, name) for name in setup['api']}
-    return build_tabletop_engine(api, _ParentModel(channel), limits,
-                                 model_time_limit_s=float(setup.get('model_time_limit_s', 120.0)))
+    return build_engine(api, _ParentModel(channel), limits, **dict(setup.get('engine_options') or {}))
 
 
 def serve(connection: Connection, control: Connection) -> None:
@@ -202,6 +203,7 @@ def serve(connection: Connection, control: Connection) -> None:
             runs['current'] = run_id if isinstance(run_id, int) else 0
             channel.call_seconds.clear()
             result = dataclasses.asdict(engine.run(str(message.get('command', ''))))
+            result['outcome'] = result['outcome'].value
             result['code'] = result['code'][:MAX_CODE_CHARS]  # the node accepts at most wire.MAX_RESULT_BYTES
             channel.send({'op': 'result', 'result': result, 'api_call_seconds': channel.call_seconds[-10_000:]})
         elif op == 'reset':

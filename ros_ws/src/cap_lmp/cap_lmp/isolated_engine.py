@@ -44,6 +44,7 @@ stops; for models you do not trust at all, also run the node in a container or a
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import os
 import select
 import signal
@@ -58,6 +59,7 @@ from cap_lmp import wire
 from cap_lmp.engine import CODE, DONE, ERROR, EXECUTING, GENERATING, CommandResult, EngineEvent, check_program_size
 from cap_lmp.errors import CapLLMError, CodeRejected, SandboxProcessLost
 from cap_lmp.llm import Completion, CompletionRequest, LLMClient
+from cap_lmp.outcome import Outcome, outcome_of
 from cap_lmp.safe_text import MAX_MESSAGE_CHARS, wire_text
 from cap_lmp.sandbox import SandboxLimits
 
@@ -159,6 +161,12 @@ def _result(values: Any) -> CommandResult:
     if line is not None and (not isinstance(line, int) or isinstance(line, bool)):
         raise _ProcessLost('protocol')
     fields['error_line'] = line
+    try:
+        fields['outcome'] = Outcome(values.get('outcome'))
+    except ValueError:
+        raise _ProcessLost('protocol') from None
+    if fields['success'] != (fields['outcome'] is Outcome.DONE):
+        raise _ProcessLost('protocol')
     source = values.get('error_source')
     fields['error_source'] = _text(source, 1000) if source is not None else None
     timings, functions = values.get('timings'), values.get('generated_functions')
@@ -175,11 +183,31 @@ def _result(values: Any) -> CommandResult:
 JAIL_MODES = ('required', 'best_effort', 'off')
 
 
-class IsolatedEngine:
-    """run / cancel / reset / add_listener / close, like Engine, with the session in a sandbox process."""
+def builder_reference(build_engine: Callable[..., Any]) -> str:
+    """'module:name' of a module-level function, which the sandbox process imports and calls; ValueError for
+    anything else (a lambda, a nested function, a bound method cannot be found by name there)."""
+    module, name = getattr(build_engine, '__module__', None), getattr(build_engine, '__qualname__', '')
+    try:  # __main__ is another module in the sandbox process
+        found = (getattr(importlib.import_module(module), name)
+                 if module and module != '__main__' and name.isidentifier() else None)
+    except (ImportError, AttributeError):
+        found = None
+    if found is not build_engine:
+        raise ValueError(f'build_engine must be a function defined at the top level of a module (got {build_engine!r})')
+    return f'{module}:{name}'
 
-    def __init__(self, api: Mapping[str, Callable[..., Any]], client: LLMClient,
-                 limits: SandboxLimits | None = None, *, domain: str = 'tabletop', stall_limit_s: float = 10.0,
+
+class IsolatedEngine:
+    """run / cancel / reset / add_listener / close, like Engine, with the session in a sandbox process.
+
+    `build_engine(api, client, limits, **engine_options)` builds the session's Engine in the sandbox process (a
+    module-level function: it travels by its module and name); `engine_options` must be JSON values, and
+    `model_time_limit_s` is passed to it as well.
+    """
+
+    def __init__(self, build_engine: Callable[..., Any], api: Mapping[str, Callable[..., Any]], client: LLMClient,
+                 limits: SandboxLimits | None = None, *, engine_options: Mapping[str, Any] | None = None,
+                 stall_limit_s: float = 10.0,
                  cancel_grace_s: float = 2.0, start_timeout_s: float = 60.0, send_timeout_s: float = 5.0,
                  model_time_limit_s: float = 120.0, address_space_extra_bytes: int | None = None,
                  jail: str = 'required', child_command: Sequence[str] | None = None) -> None:
@@ -192,7 +220,8 @@ class IsolatedEngine:
         self._client = client
         self.model_time_limit_s = model_time_limit_s
         self._setup = {
-            'op': 'setup', 'api': sorted(self._api), 'domain': domain, 'model_time_limit_s': model_time_limit_s,
+            'op': 'setup', 'api': sorted(self._api), 'build_engine': builder_reference(build_engine),
+            'engine_options': {**(engine_options or {}), 'model_time_limit_s': model_time_limit_s},
             'jail': jail,
             'limits': dataclasses.asdict(self.limits),
             # Room for the program's own data (the sandbox's limit) plus the allocator's and libraries' slack.
@@ -597,7 +626,8 @@ class IsolatedEngine:
             'memory': 'the program ran out of memory and the sandbox process ended',
             'stalled': f'the program stopped responding (one operation ran for more than {self.stall_limit_s:g} s '
                        f'without a pause), so its sandbox process was killed',
-            'cancelled': f'the program did not stop within {self.cancel_grace_s:g} s, so its sandbox process was killed',
+            'cancelled': f'the program did not stop within {self.cancel_grace_s:g} s, so its sandbox process was '
+                         'killed',
             'timeout': f'the program ran past its time limit of {self.limits.time_limit_s:g} s and did not stop, so '
                        'its sandbox process was killed',
             'protocol': 'the sandbox process sent a malformed message or stopped reading, and was killed',
@@ -617,6 +647,7 @@ class IsolatedEngine:
         total = time.monotonic() - started
         model = self._clock.model_s if self._clock.started >= started else 0.0
         result = CommandResult(command=command, command_id=0, success=False, code=code, message=message,
+                               outcome=outcome_of(SandboxProcessLost(message, reason)),
                                error_type=SandboxProcessLost.__name__, stop_reason=reason,
                                timings={'total_s': total, 'model_s': model, 'execute_s': total - model,
                                         'overhead_s': total - model})

@@ -15,6 +15,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any
 
+from cap_lmp.outcome import Outcome
 from cap_lmp.safe_text import one_line, wire_text
 
 MAX_COMMAND_CHARS = 1000  # of a normalised command: an instruction of a sentence or a few, not a document
@@ -44,7 +45,7 @@ class Job:
     stop_reason: str = ''  # why it was cancelled, in words
     result: Any = None  # the engine's CommandResult, or None when dropped before running
     goal_handle: Any = None  # the /cap/execute goal waiting for this job, if it came as one
-    outcome: str = ''  # 'done', 'error', 'cancelled', 'refused'
+    outcome: Outcome | None = None  # how it ended; None while it waits or runs
     refusal: str = ''  # why it was refused without running, in words
 
 

@@ -13,18 +13,19 @@ bounded; logs also without control characters), so no text can kill the thread t
 thread dies anyway, the node refuses every later command naming the cause, and the standalone process (`main`)
 logs one line and exits with thread_watch.FATAL_EXIT_CODE instead of living on without answering.
 
-Parameters are read at start-up; of those changed at run time, max_queued_commands, service_timeout_s and
-motion_timeout_s take effect from the next command, and every other change is rejected with the reason.
+The `domain` parameter picks the robot domain (prompts, robot API, default cassette) from
+cap_lmp_ros.domains.registry. Parameters (LmpNodeConfig in cap_lmp_ros/config.py) are read at start-up; of those
+changed at run time, max_queued_commands, service_timeout_s and motion_timeout_s take effect from the next command,
+and every other change is rejected with the reason.
 """
 from __future__ import annotations
 
 import os
-import pathlib
 import sys
 from typing import Any
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
@@ -38,17 +39,18 @@ from cap_interfaces.action import ExecuteCommand
 from cap_interfaces.msg import GraphNames, StatusEvent
 from cap_lmp import engine as engine_module
 from cap_lmp.cassette import make_client
-from cap_lmp_ros.command_queue import CommandQueue, Job
+from cap_lmp.engine_protocol import CommandEngine
 from cap_lmp.isolated_engine import JAIL_MODES, IsolatedEngine
 from cap_lmp.llm import NO_MODEL_CONFIGURED
-from cap_lmp_ros.domains.tabletop.robot_api import RosTabletopApi
+from cap_lmp.outcome import Outcome
 from cap_lmp.safe_text import terminal_text, wire_text
 from cap_lmp.sandbox import SandboxLimits
-from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
-from cap_lmp_ros.thread_watch import FATAL_EXIT_CODE, ThreadWatch
 from cap_lmp.wire import MAX_CODE_CHARS
-
-DEFAULT_CASSETTE = pathlib.Path(__file__).resolve().parent / 'domains' / 'tabletop' / 'cassettes' / 'tabletop_reference.yaml'
+from cap_lmp_ros.command_queue import CommandQueue, Job
+from cap_lmp_ros.config import RUNTIME_PARAMETERS, LmpNodeConfig
+from cap_lmp_ros.domains.registry import engine_api, get_domain
+from cap_lmp_ros.thread_watch import FATAL_EXIT_CODE, ThreadWatch
+from cap_ros_common.parameters import declare_config, parameter_names
 
 # Commands and stops must not be lost: reliable, a few deep.
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -57,8 +59,14 @@ EVENT_QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durabil
 
 _STAGES = {engine_module.GENERATING: StatusEvent.STAGE_GENERATING, engine_module.CODE: StatusEvent.STAGE_CODE,
            engine_module.EXECUTING: StatusEvent.STAGE_EXECUTING}
-# Parameters whose change at run time takes effect from the next command; any other change is rejected.
-RUNTIME_PARAMETERS = ('max_queued_commands', 'service_timeout_s', 'motion_timeout_s')
+# The outcome field of a goal's result, and the final status stage of a command that ran.
+RESULT_OUTCOMES = {Outcome.DONE: ExecuteCommand.Result.OUTCOME_DONE, Outcome.ERROR: ExecuteCommand.Result.OUTCOME_ERROR,
+                   Outcome.CANCELLED: ExecuteCommand.Result.OUTCOME_CANCELLED,
+                   Outcome.REFUSED: ExecuteCommand.Result.OUTCOME_REFUSED,
+                   Outcome.MODEL_ERROR: ExecuteCommand.Result.OUTCOME_MODEL_ERROR}
+_FINAL_STAGES = {Outcome.DONE: StatusEvent.STAGE_DONE, Outcome.REFUSED: StatusEvent.STAGE_REFUSED,
+                 Outcome.CANCELLED: StatusEvent.STAGE_CANCELLED}  # errors of every kind: STAGE_ERROR
+__all__ = ['COMMAND_QOS', 'EVENT_QOS', 'RESULT_OUTCOMES', 'RUNTIME_PARAMETERS', 'LmpNode', 'main']
 
 
 class LmpNode(Node):
@@ -67,72 +75,50 @@ class LmpNode(Node):
 
     def __init__(self, *, thread_watch: ThreadWatch | None = None, **kwargs: Any) -> None:
         super().__init__('lmp_node', **kwargs)
-        self._declared: set[str] = set()
-        backend = self._parameter('llm_backend', 'cassette', 'cassette (replay a recorded cassette, offline) or '
-                                  'http (an OpenAI-compatible endpoint; CAP_LLM_BASE_URL, CAP_LLM_MODEL, '
-                                  'CAP_LLM_API_KEY from the environment unless set below).')
-        cassette = self._parameter('cassette', '', 'Cassette file for llm_backend=cassette, or the file to record '
-                                   'into with record_cassette=true; empty: the packaged reference cassette.')
-        cassette = cassette or str(DEFAULT_CASSETTE)
-        record = self._parameter('record_cassette', False, 'With llm_backend=http: also record every answer '
-                                 'into `cassette`.')
-        base_url = self._parameter('base_url', '', 'OpenAI-compatible endpoint; empty: CAP_LLM_BASE_URL.')
-        model = self._parameter('model', '', 'Model name; empty: CAP_LLM_MODEL.')
-        api = self._parameter('api', 'chat', 'chat (chat completions) or completions (legacy completions).')
-        request_timeout = self._parameter('request_timeout_s', 60.0, 'Timeout of one model request [s].')
-        time_limit = self._parameter('time_limit_s', 300.0, 'Wall-clock limit of one generated program, robot '
-                                     'motion included [s].')
-        service_timeout = self._parameter('service_timeout_s', 5.0, 'Timeout of one perception request [s].')
-        motion_timeout = self._parameter('motion_timeout_s', 180.0, 'Timeout of one pick-and-place [s].')
-        max_queued = self._parameter('max_queued_commands', 5, 'Commands that may wait while one runs; more are '
-                                     'refused.')
-        domain = self._parameter('domain', 'tabletop', 'Robot domain of the prompts and API (tabletop).')
-        if domain != 'tabletop':
-            raise ValueError(f'parameter domain={domain!r}: only "tabletop" exists so far')
+        self._declared = set(parameter_names(LmpNodeConfig))
+        config = self.config = declare_config(self, LmpNodeConfig)
+        self.domain = get_domain(config.domain)
+        cassette = config.cassette or str(self.domain.cassette)
+        if config.jail not in JAIL_MODES:
+            raise ValueError(f'parameter jail={config.jail!r} is not one of {", ".join(JAIL_MODES)}')
 
-        isolated = self._parameter('sandbox_process', True, 'Run generated programs in a sandbox process of their '
-                                   'own (a crash or a stuck C call then costs the session, not the node); false: '
-                                   'in this process (faster to start, for debugging).')
-        stall_limit = self._parameter('stall_limit_s', 10.0, 'With sandbox_process: kill the sandbox process when '
-                                      'one operation holds it this long without a pause [s].')
-        jail = self._parameter('jail', 'required', 'With sandbox_process: the kernel jail of the sandbox process '
-                               '(no file writes, sockets, exec or new processes): required (the node does not '
-                               'start without it), best_effort (what the kernel offers, the rest logged) or off.')
-        if jail not in JAIL_MODES:
-            raise ValueError(f'parameter jail={jail!r} is not one of {", ".join(JAIL_MODES)}')
-
-        http_options: dict[str, Any] = {'timeout_s': request_timeout, 'api': api}
-        if base_url:
-            http_options['base_url'] = base_url
-        if model:
-            http_options['model'] = model
-        if backend == 'cassette':
+        http_options: dict[str, Any] = {'timeout_s': config.request_timeout_s, 'api': config.api}
+        if config.base_url:
+            http_options['base_url'] = config.base_url
+        if config.model:
+            http_options['model'] = config.model
+        if config.llm_backend == 'cassette':
             client_options: dict[str, Any] = {'cassette': cassette}
-        elif backend == 'http':
+        elif config.llm_backend == 'http':
             # Checked here, not where the client is built (possibly in the sandbox process): one line, at once.
-            if not (model or os.environ.get('CAP_LLM_MODEL')):
+            if not (config.model or os.environ.get('CAP_LLM_MODEL')):
                 raise ValueError(NO_MODEL_CONFIGURED)
-            client_options = {'cassette': cassette if record else None, 'record': record, **http_options}
+            client_options = {'cassette': cassette if config.record_cassette else None,
+                              'record': config.record_cassette, **http_options}
         else:
-            raise ValueError(f'parameter llm_backend={backend!r} is not one of cassette, http')
-        if api not in ('chat', 'completions'):
-            raise ValueError(f'parameter api={api!r} is not one of chat, completions')
+            raise ValueError(f'parameter llm_backend={config.llm_backend!r} is not one of cassette, http')
+        if config.api not in ('chat', 'completions'):
+            raise ValueError(f'parameter api={config.api!r} is not one of chat, completions')
 
         self._code_publisher = self.create_publisher(String, GraphNames.CODE_TOPIC, EVENT_QOS)
         self._status_publisher = self.create_publisher(StatusEvent, GraphNames.STATUS_TOPIC, EVENT_QOS)
         say_publisher = self.create_publisher(String, GraphNames.SAY_TOPIC, EVENT_QOS)
-        self.robot = RosTabletopApi(self, say_publisher, service_timeout, motion_timeout)
-        model_time_limit = self._parameter('model_time_limit_s', 120.0, 'Overall model time per command [s].')
-        limits = SandboxLimits(time_limit_s=time_limit)
-        if isolated:
-            self.engine = IsolatedEngine(self.robot.functions(), make_client(**client_options), limits, domain=domain,
-                                         stall_limit_s=stall_limit, model_time_limit_s=model_time_limit,
-                                         jail=jail)
+        self.robot = self.domain.robot_api(self, say_publisher, config.service_timeout_s, config.motion_timeout_s)
+        api = engine_api(self.domain, self.robot.functions())
+        limits = SandboxLimits(time_limit_s=config.time_limit_s)
+        self.engine: CommandEngine
+        if config.sandbox_process:
+            isolated = IsolatedEngine(self.domain.build_engine, api, make_client(**client_options), limits,
+                                      stall_limit_s=config.stall_limit_s,
+                                      model_time_limit_s=config.model_time_limit_s, jail=config.jail)
+            where = f'sandbox process {isolated.pid}'
+            self.engine = isolated
         else:
-            self.engine = build_tabletop_engine(self.robot.functions(), make_client(**client_options), limits,
-                                                model_time_limit_s=model_time_limit)
+            self.engine = self.domain.build_engine(api, make_client(**client_options), limits,
+                                                   model_time_limit_s=config.model_time_limit_s)
+            where = 'in-process sandbox'
         self.engine.add_listener(self._on_engine_event)
-        self.queue = CommandQueue(max_queued)
+        self.queue = CommandQueue(config.max_queued_commands)
         self._current: Job | None = None
         self._closing = False
         self.thread_watch = thread_watch or ThreadWatch(log=self._log_fatal)
@@ -152,13 +138,8 @@ class LmpNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.thread_watch.add_callback(self._refuse_waiting)
         self._worker = self.thread_watch.start(self._work, 'lmp_worker')
-        where = f'sandbox process {self.engine.pid}' if isolated else 'in-process sandbox'
-        self.get_logger().info(f'ready: LLM backend {backend}' + (f' ({cassette})' if backend == 'cassette' else '')
-                               + f', {where}')
-
-    def _parameter(self, name: str, default: Any, description: str) -> Any:
-        self._declared.add(name)
-        return self.declare_parameter(name, default, ParameterDescriptor(description=description)).value
+        self.get_logger().info(f'ready: domain {self.domain.name}, LLM backend {config.llm_backend}'
+                               + (f' ({cassette})' if config.llm_backend == 'cassette' else '') + f', {where}')
 
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
         """Apply the few parameters that can change between commands; reject any other change, saying why."""
@@ -188,7 +169,7 @@ class LmpNode(Node):
         """A thread the node depends on died: answer the commands that would otherwise wait for ever."""
         for job in self.queue.drain():
             job.refusal = f'refused: lmp_node cannot run commands any more ({failure})'
-            job.outcome = 'refused'
+            job.outcome = Outcome.REFUSED
             self._publish_status(job, StatusEvent.STAGE_REFUSED, message=job.refusal)
             job.finished.set()
 
@@ -216,7 +197,7 @@ class LmpNode(Node):
                                  if self.queue.waiting() > 1 else '')
         else:
             self._publish_status(job, StatusEvent.STAGE_REFUSED, message=job.refusal)
-            job.outcome = 'refused'
+            job.outcome = Outcome.REFUSED
             job.finished.set()
         return job, queued
 
@@ -232,7 +213,7 @@ class LmpNode(Node):
                     job.cancel_requested = True
                     job.stop_reason = 'cancelled by the client of /cap/execute'
                     if self.queue.withdraw(job):
-                        job.outcome = 'cancelled'
+                        job.outcome = Outcome.CANCELLED
                         self._publish_status(job, StatusEvent.STAGE_CANCELLED, message='cancelled before it ran')
                         job.finished.set()
                     elif self._current is job:
@@ -240,6 +221,8 @@ class LmpNode(Node):
         finally:
             job.goal_handle = None
         result = ExecuteCommand.Result(command_id=job.command_id)
+        outcome = job.outcome or Outcome.ERROR
+        result.outcome = RESULT_OUTCOMES[outcome]
         if job.result is not None:
             result.success = bool(job.result.success)
             result.code = wire_text(job.result.code, MAX_CODE_CHARS)
@@ -250,10 +233,10 @@ class LmpNode(Node):
             result.model_seconds = float(job.result.timings.get('model_s', 0.0))
             result.total_seconds = float(job.result.timings.get('total_s', 0.0))
         else:
-            result.message = job.refusal or {'cancelled': 'cancelled before it ran',
-                                             'error': 'failed outside the program (see /cap/status)'}.get(
-                job.outcome, job.outcome or 'lmp_node stopped before the command ran')
-        if job.outcome == 'cancelled' and goal_handle.is_cancel_requested:
+            result.message = job.refusal or {Outcome.CANCELLED: 'cancelled before it ran',
+                                             Outcome.ERROR: 'failed outside the program (see /cap/status)'}.get(
+                job.outcome, 'lmp_node stopped before the command ran')
+        if outcome is Outcome.CANCELLED and goal_handle.is_cancel_requested:
             goal_handle.canceled()
         elif result.success:
             goal_handle.succeed()
@@ -275,7 +258,7 @@ class LmpNode(Node):
             except Exception as error:  # the engine reports program errors itself; this is a last resort
                 if self._closing:
                     return
-                job.outcome = 'error'
+                job.outcome = Outcome.ERROR
                 text = f'internal error: {type(error).__name__}: {wire_text(str(error))}'
                 self._log_error(f'{job.command_id} failed outside the program: {text}')
                 self._publish_status(job, StatusEvent.STAGE_ERROR, message=text)
@@ -283,24 +266,19 @@ class LmpNode(Node):
                 self._current = None
                 self.queue.finish(job)
 
-    def _outcome(self, job: Job) -> str:
+    def _outcome(self, job: Job) -> Outcome:
         """Publish the final status of a job that ran, and name its outcome."""
         result = job.result
-        if result.success:
-            stage, outcome = StatusEvent.STAGE_DONE, 'done'
-        elif result.error_type in ('CodeRejected', 'SyntaxError'):
-            # The program never ran: nothing moved.
-            stage, outcome = StatusEvent.STAGE_REFUSED, 'refused'
-        elif result.stop_reason == 'cancelled' or result.error_type == 'StoppedError' or job.cancel_requested:
-            stage, outcome = StatusEvent.STAGE_CANCELLED, 'cancelled'
-            if job.stop_reason:
-                result.message = f'{job.stop_reason} ({result.message})'
-        else:
-            stage, outcome = StatusEvent.STAGE_ERROR, 'error'
+        outcome = result.outcome
+        if outcome not in (Outcome.DONE, Outcome.REFUSED) and job.cancel_requested:
+            outcome = Outcome.CANCELLED  # whatever the stop caused (a failed robot call, a lost model request)
+        if outcome is Outcome.CANCELLED and job.stop_reason:
+            result.message = f'{job.stop_reason} ({result.message})'
         # The final status says what the command cost, model time first: it has a deadline of its own.
         cost = (f"model {result.timings.get('model_s', 0.0):.2f} s in {result.model_calls} call(s), "
                 f"total {result.timings.get('total_s', 0.0):.2f} s")
-        self._publish_status(job, stage, code=result.code, message=f'{result.message or outcome} ({cost})')
+        self._publish_status(job, _FINAL_STAGES.get(outcome, StatusEvent.STAGE_ERROR), code=result.code,
+                             message=f'{result.message or outcome.value} ({cost})')
         return outcome
 
     def _on_engine_event(self, event: engine_module.EngineEvent) -> None:
@@ -335,7 +313,7 @@ class LmpNode(Node):
     def stop(self, reason: str) -> None:
         """End the running command and its motion; drop waiting commands."""
         for job in self.queue.drain():
-            job.outcome = 'cancelled'
+            job.outcome = Outcome.CANCELLED
             self._publish_status(job, StatusEvent.STAGE_CANCELLED, message=reason)
             job.finished.set()
         current = self._current
@@ -360,9 +338,7 @@ class LmpNode(Node):
         self.thread_watch.stop()
         self.queue.close()
         self._stop_running()
-        close = getattr(self.engine, 'close', None)
-        if close is not None:
-            close()
+        self.engine.close()
         super().destroy_node()
 
 

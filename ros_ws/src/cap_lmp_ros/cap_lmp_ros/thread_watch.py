@@ -96,7 +96,7 @@ class ThreadWatch:
         def run() -> None:
             try:
                 target()
-            except BaseException as error:  # noqa: B036 (a dying thread is reported whatever killed it)
+            except BaseException as error:  # a dying thread is reported whatever killed it
                 self.report(thread_name, error)
 
         return run

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 
 from cap_lmp import wire
-from cap_lmp.engine import CODE, DONE, ERROR, EXECUTING, GENERATING
+from cap_lmp.engine import CODE, DONE, EXECUTING, GENERATING
 from cap_lmp.isolated_engine import IsolatedEngine
+from cap_lmp_ros.domains.tabletop.lmps import build_engine
 from cap_lmp.llm import OpenAICompatibleClient
 from cap_lmp.sandbox import SandboxLimits
 from cap_lmp.testing.openai_server import ScriptedOpenAIServer
@@ -58,7 +59,8 @@ def table() -> Table:
 
 @pytest.fixture
 def engine(server, table):
-    isolated = IsolatedEngine(table.api(), OpenAICompatibleClient(server.base_url, 'scripted-model', timeout_s=10.0),
+    client = OpenAICompatibleClient(server.base_url, 'scripted-model', timeout_s=10.0)
+    isolated = IsolatedEngine(build_engine, table.api(), client,
                               SandboxLimits(time_limit_s=60.0), stall_limit_s=2.0,
                               address_space_extra_bytes=400 << 20)
     yield isolated
@@ -96,7 +98,7 @@ def test_robot_errors_reach_the_program_with_their_message(engine):
 
 
 def test_an_endless_loop_is_stopped_by_the_sandbox_and_the_process_stays(server, table):
-    quick = IsolatedEngine(table.api(), OpenAICompatibleClient(server.base_url, 'scripted-model'),
+    quick = IsolatedEngine(build_engine, table.api(), OpenAICompatibleClient(server.base_url, 'scripted-model'),
                            SandboxLimits(time_limit_s=1.0))
     try:
         pid = quick.pid
@@ -198,7 +200,7 @@ def living_processes_in_group(group: int) -> list[int]:
 def hostile_engine(mode: str, api=None, **options) -> IsolatedEngine:
     options = {'stall_limit_s': 1.0, 'cancel_grace_s': 0.5, 'start_timeout_s': 10.0, 'send_timeout_s': 1.0,
                **options}
-    return IsolatedEngine(api or {'where': lambda: 'here', 'slow': lambda: time.sleep(2.0)},
+    return IsolatedEngine(build_engine, api or {'where': lambda: 'here', 'slow': lambda: time.sleep(2.0)},
                           OpenAICompatibleClient('http://127.0.0.1:9', 'no-model'),
                           options.pop('limits', SandboxLimits(time_limit_s=2.0)),
                           child_command=[sys.executable, '-m', 'cap_lmp.testing.hostile_child', mode], **options)
@@ -211,6 +213,8 @@ def hostile_engine(mode: str, api=None, **options) -> IsolatedEngine:
     ('huge_integer', 'protocol'),
     ('result_of_wrong_shape', 'protocol'),
     ('result_of_wrong_types', 'protocol'),
+    ('unknown_outcome', 'protocol'),
+    ('outcome_against_success', 'protocol'),  # 'done' with success false
     ('empty_event', 'protocol'),
     ('realtime_signal', 'crashed'),
     ('grandchild_keeps_the_socket', 'crashed'),  # the child died; its grandchild must not keep the run alive
@@ -272,7 +276,8 @@ def test_the_node_checks_the_model_requests_of_a_hostile_process():
     """Malformed model requests get an error reply and never reach the model; a well-formed one is answered."""
     import json
     with ScriptedOpenAIServer({'the blocks': 'ret_val = 1'}) as scripted:
-        engine = IsolatedEngine({}, OpenAICompatibleClient(scripted.base_url, 'scripted-model', max_retries=0),
+        client = OpenAICompatibleClient(scripted.base_url, 'scripted-model', max_retries=0)
+        engine = IsolatedEngine(build_engine, {}, client,
                                 SandboxLimits(time_limit_s=5.0), model_time_limit_s=3.0,
                                 child_command=[sys.executable, '-m', 'cap_lmp.testing.hostile_child',
                                                'asks_the_model_badly'])

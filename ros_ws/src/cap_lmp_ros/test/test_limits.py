@@ -15,6 +15,7 @@ from cap_lmp.cassette import Cassette, CassetteClient
 from cap_lmp.engine import check_program_size
 from cap_lmp.errors import CodeRejected
 from cap_lmp.isolated_engine import IsolatedEngine
+from cap_lmp_ros.domains.tabletop.lmps import build_engine
 from cap_lmp.llm import OpenAICompatibleClient
 from cap_lmp.sandbox import SandboxLimits
 from cap_lmp.testing.openai_server import ScriptedOpenAIServer, ScriptedReply
@@ -40,8 +41,8 @@ def make_engine(server, table, **options) -> IsolatedEngine:
     options = {'stall_limit_s': 30.0, 'model_time_limit_s': 30.0, 'address_space_extra_bytes': 700 << 20,
                **options}
     limits = options.pop('limits', SandboxLimits(time_limit_s=TIME_LIMIT_S, max_memory_growth_bytes=256 << 20))
-    return IsolatedEngine(table.api(), OpenAICompatibleClient(server.base_url, 'scripted-model', timeout_s=30.0,
-                                                              max_retries=0), limits, **options)
+    client = OpenAICompatibleClient(server.base_url, 'scripted-model', timeout_s=30.0, max_retries=0)
+    return IsolatedEngine(build_engine, table.api(), client, limits, **options)
 
 
 @pytest.fixture
@@ -149,7 +150,7 @@ def test_cancel_while_the_model_is_asked_ends_within_the_grace(engine, table, se
 def test_the_cassette_records_in_the_node(server, table, tmp_path):
     path = tmp_path / 'recorded.yaml'
     backend = OpenAICompatibleClient(server.base_url, 'scripted-model')
-    engine = IsolatedEngine(table.api(), CassetteClient(path, mode='record', backend=backend),
+    engine = IsolatedEngine(build_engine, table.api(), CassetteClient(path, mode='record', backend=backend),
                             SandboxLimits(time_limit_s=TIME_LIMIT_S))
     try:
         assert engine.run(MOVE).success
@@ -259,7 +260,7 @@ def test_an_enormous_exception_is_reported_bounded(table, isolated):
     with ScriptedOpenAIServer({**EXCEPTIONS, MOVE: PROGRAMS[MOVE]}) as server:
         client = OpenAICompatibleClient(server.base_url, 'scripted-model', max_retries=0)
         limits = SandboxLimits(time_limit_s=TIME_LIMIT_S)
-        engine = (IsolatedEngine(table.api(), client, limits) if isolated
+        engine = (IsolatedEngine(build_engine, table.api(), client, limits) if isolated
                   else build_tabletop_engine(table.api(), client, limits))
         try:
             for command in EXCEPTIONS:

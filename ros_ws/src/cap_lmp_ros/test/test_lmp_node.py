@@ -32,7 +32,8 @@ def _write_cassette(path):
     path.write_text(yaml.safe_dump({'format': 'cap-llm-cassette/1', 'entries': entries}))
 
 
-STUB_OBJECTS = TWO_BLOCKS + '  - {color: green, category: bowl, position: [0.0, -0.4, 0.03], size: [0.13, 0.13, 0.04]}\n'
+STUB_OBJECTS = TWO_BLOCKS + ('  - {color: green, category: bowl, position: [0.0, -0.4, 0.03], '
+                             'size: [0.13, 0.13, 0.04]}\n')
 
 
 @pytest.fixture
@@ -61,17 +62,18 @@ def test_a_topic_command_runs_and_reports_every_stage(graph):
 def test_unknown_object_is_an_error_naming_it_and_the_next_command_works(graph):
     outcome = graph.run('where is the purple block')
     assert outcome.status == GoalStatus.STATUS_ABORTED
-    assert not outcome.result.success
+    assert not outcome.result.success and outcome.result.outcome == ExecuteCommand.Result.OUTCOME_ERROR
     assert "'purple block'" in outcome.result.message and 'red block' in outcome.result.message
     assert wait_for(lambda: graph.final(outcome.result.command_id) is not None)
     assert graph.final(outcome.result.command_id).stage == StatusEvent.STAGE_ERROR
     again = graph.run('which blocks are there')
     assert again.result.success and again.status == GoalStatus.STATUS_SUCCEEDED
+    assert again.result.outcome == ExecuteCommand.Result.OUTCOME_DONE
 
 
 def test_unsafe_code_is_refused_before_it_runs(graph, tmp_path):
     outcome = graph.run('delete your files')
-    assert not outcome.result.success
+    assert not outcome.result.success and outcome.result.outcome == ExecuteCommand.Result.OUTCOME_REFUSED
     assert 'import' in outcome.result.message
     assert wait_for(lambda: graph.final(outcome.result.command_id) is not None)
     assert graph.final(outcome.result.command_id).stage == StatusEvent.STAGE_REFUSED
@@ -80,7 +82,7 @@ def test_unsafe_code_is_refused_before_it_runs(graph, tmp_path):
 
 def test_a_missing_cassette_entry_names_the_query(graph):
     outcome = graph.run('juggle the bowls')
-    assert not outcome.result.success
+    assert not outcome.result.success and outcome.result.outcome == ExecuteCommand.Result.OUTCOME_MODEL_ERROR
     assert 'juggle the bowls' in outcome.result.message
 
 
@@ -94,6 +96,7 @@ def test_cancelling_the_goal_stops_an_endless_program(graph):
     box['handle'].cancel_goal_async()
     assert wait_for(result_future.done)
     assert result_future.result().status == GoalStatus.STATUS_CANCELED
+    assert result_future.result().result.outcome == ExecuteCommand.Result.OUTCOME_CANCELLED
     assert graph.run('which blocks are there').result.success
 
 

@@ -12,6 +12,7 @@ from rclpy.context import Context
 from rclpy.parameter import Parameter
 from std_msgs.msg import Empty, String
 
+from cap_interfaces.action import ExecuteCommand
 from cap_interfaces.msg import StatusEvent
 from cap_lmp_ros.command_queue import MAX_COMMAND_CHARS
 from cap_lmp_ros.testing.lmp_graph import LmpGraph, wait_for
@@ -97,6 +98,7 @@ def test_text_that_cannot_be_encoded_never_kills_the_node(graph, command):
 def test_an_empty_command_is_refused_saying_it_is_empty(graph):
     refused = graph.run(' \n\t ')
     assert not refused.result.success and refused.result.message == 'refused: the command is empty'
+    assert refused.result.outcome == ExecuteCommand.Result.OUTCOME_REFUSED  # refused before it ran
     assert wait_for(lambda: graph.final(refused.result.command_id) is not None)
     status = graph.final(refused.result.command_id)
     assert status.stage == StatusEvent.STAGE_REFUSED and status.message == 'refused: the command is empty'

@@ -15,11 +15,11 @@ from cap_lmp_ros.testing.table import Table
 
 LMP_PROMPTS = ['tabletop_ui', 'parse_obj_name', 'parse_position', 'parse_question', 'transform_shape_pts', 'fgen']
 
-# BENCHMARK.md: attribute values that are "unseen" (never in prompts). "right" is an unseen direction; the only
-# allowed use of the word is the seen corner "top right corner".
+# The benchmark's attribute values that are "unseen" (never in prompts, so the model must generalise to them).
+# "right" is an unseen direction; the only allowed use of the word is the seen corner "top right corner".
 UNSEEN_ATTRIBUTES = [r'pink', r'cyan', r'brown', r'gr[ae]y', r'purple', r'bottom', r'right', r'farthest', r'furthest',
                      r'a lot', r'third', r'fourth', r'3rd', r'4th', r'diagonal\w*']
-# BENCHMARK.md: the unseen instruction templates, whatever attribute values they are written with.
+# The benchmark's unseen instruction templates, whatever attribute values they are written with.
 UNSEEN_TEMPLATES = {
     'different corners': r'different corners',
     'mismatched colors': r'mis-?match',

@@ -13,7 +13,7 @@ import pytest
 
 from cap_lmp.errors import CodeRejected, ExecutionStopped
 from cap_lmp.llm import Completion
-from cap_lmp.sandbox import Sandbox, SandboxLimits
+from cap_lmp.sandbox import Sandbox
 from cap_lmp.testing.attack_programs import DISABLE_TRACING
 from cap_lmp.testing.sandbox_programs import TEST_LIMITS as LIMITS, run_program as run
 

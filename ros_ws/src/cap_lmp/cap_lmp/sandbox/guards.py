@@ -110,7 +110,7 @@ def check_int_bits(bits, what):
 
 def _check_broadcast(a, b, what):
     if isinstance(a, _ARRAYS) or isinstance(b, _ARRAYS):
-        if getattr(a, 'dtype', None) == object or getattr(b, 'dtype', None) == object:
+        if getattr(a, 'dtype', None) == object or getattr(b, 'dtype', None) == object:  # noqa: E721 (a dtype)
             forbid(f'{what} on an object array is not available in the sandbox (its elements grow without bound)')
         shape_a = numpy.shape(a) if isinstance(a, (_ARRAYS, list, tuple)) else ()
         shape_b = numpy.shape(b) if isinstance(b, (_ARRAYS, list, tuple)) else ()

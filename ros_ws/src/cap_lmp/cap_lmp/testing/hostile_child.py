@@ -18,7 +18,8 @@ import time
 from multiprocessing.connection import Connection
 
 RESULT = {'command': 'cmd', 'command_id': 1, 'success': False, 'code': '', 'message': 'stopped',
-          'error_type': 'StoppedError', 'error_line': None, 'error_source': None, 'stop_reason': '',
+          'outcome': 'cancelled', 'error_type': 'StoppedError', 'error_line': None, 'error_source': None,
+          'stop_reason': '',
           'model_calls': 0, 'prompt_tokens': 0, 'completion_tokens': 0, 'timings': {}, 'generated_functions': []}
 
 
@@ -54,6 +55,10 @@ def main() -> None:
         send({'op': 'result', 'result': [1]})
     elif mode == 'result_of_wrong_types':
         send({'op': 'result', 'result': {**RESULT, 'success': 'no'}})
+    elif mode == 'unknown_outcome':
+        send({'op': 'result', 'result': {**RESULT, 'outcome': 'victory'}})
+    elif mode == 'outcome_against_success':
+        send({'op': 'result', 'result': {**RESULT, 'outcome': 'done'}})
     elif mode == 'empty_event':
         send({'op': 'event'})
     elif mode == 'realtime_signal':

@@ -1,4 +1,4 @@
-"""A table top in memory: objects at xy positions and the robot API of DESIGN.md §5 over it.
+"""A table top in memory: objects at xy positions and the table-top robot API of generated code over it.
 
 Not a simulator: `put_first_on_second` moves the object to the target instantly. It lets the engine's tests and
 benchmark run real generated programs against a world whose state they can check, without ROS or MuJoCo. The API

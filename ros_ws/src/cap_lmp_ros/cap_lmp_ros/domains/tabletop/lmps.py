@@ -1,9 +1,10 @@
 """The table-top domain: named positions, the pure helper functions of the robot API, and the table-top LMPs.
 
-Facts (BENCHMARK.md, DESIGN.md §6): table-top bounds x in [-0.3, 0.3], y in [-0.8, -0.2]; normalised coordinates
-[0, 0] = (-0.25, -0.75) (bottom-left), [1, 1] = (0.25, -0.25) (top-right); "top" is +y, "left" is -x.
-The functions that need the robot (get_obj_pos, put_first_on_second, ...) are bound by the caller (the ROS node, or a
-table model in tests); the pure ones are here so every binding shares them.
+The named positions come from cap_tabletop.workspace (re-exported here): table-top bounds x in [-0.3, 0.3],
+y in [-0.8, -0.2]; normalised coordinates [0, 0] = (-0.25, -0.75) (bottom-left), [1, 1] = (0.25, -0.25)
+(top-right); "top" is +y, "left" is -x. The functions that need the robot (get_obj_pos, put_first_on_second, ...)
+are bound by the caller (the ROS node, or a table model in tests); the pure ones are here so every binding shares
+them. No rclpy here: the sandbox process imports this module to build its engine.
 """
 from __future__ import annotations
 
@@ -16,19 +17,11 @@ from cap_lmp.engine import Engine, LMPConfig
 from cap_lmp.llm import LLMClient
 from cap_lmp.prompts import load_prompt
 from cap_lmp.sandbox import SandboxLimits
+from cap_tabletop.workspace import CORNERS, MIDDLE, NORMALISED_ORIGIN, NORMALISED_SPAN, SIDES
 
 PROMPTS_DIR = Path(__file__).resolve().parent / 'prompts'
 
-NORMALISED_ORIGIN = np.array([-0.25, -0.75])
-NORMALISED_SPAN = np.array([0.5, 0.5])
-CORNERS = {
-    'top left corner': (-0.25, -0.25), 'top right corner': (0.25, -0.25),
-    'bottom left corner': (-0.25, -0.75), 'bottom right corner': (0.25, -0.75),
-}
-SIDES = {'top side': (0.0, -0.25), 'bottom side': (0.0, -0.75), 'left side': (-0.25, -0.5), 'right side': (0.25, -0.5)}
-MIDDLE = (0.0, -0.5)
-
-# Names generated code may call, besides np, Shapely and the LMPs (DESIGN.md §5, table-top).
+# Names generated code may call, besides np, Shapely and the LMPs.
 TABLETOP_API = ('get_obj_names', 'get_obj_pos', 'get_bbox', 'get_color', 'is_obj_visible', 'denormalize_xy',
                 'get_corner_name', 'get_side_name', 'put_first_on_second', 'say')
 
@@ -71,10 +64,17 @@ def tabletop_lmp_configs() -> list[LMPConfig]:
     ]
 
 
-def build_tabletop_engine(api: Mapping[str, Callable[..., Any]], client: LLMClient,
-                          limits: SandboxLimits | None = None, **engine_options: Any) -> Engine:
+def build_engine(api: Mapping[str, Callable[..., Any]], client: LLMClient, limits: SandboxLimits | None = None,
+                 **engine_options: Any) -> Engine:
     """An Engine with the table-top LMPs over `api` (the robot functions); the pure helpers are added if absent."""
     names: dict[str, Any] = {'denormalize_xy': denormalize_xy, 'get_corner_name': get_corner_name,
                              'get_side_name': get_side_name}
     names.update(api)
     return Engine(tabletop_lmp_configs(), client, names, limits=limits, default_lmp='tabletop_ui', **engine_options)
+
+
+build_tabletop_engine = build_engine  # the name callers outside the registry use
+
+__all__ = ['CORNERS', 'MIDDLE', 'NORMALISED_ORIGIN', 'NORMALISED_SPAN', 'PROMPTS_DIR', 'SIDES', 'TABLETOP_API',
+           'build_engine', 'build_tabletop_engine', 'denormalize_xy', 'get_corner_name', 'get_side_name',
+           'tabletop_lmp_configs']

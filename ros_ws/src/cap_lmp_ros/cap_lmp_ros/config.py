@@ -1,0 +1,40 @@
+"""The parameters of lmp_node, each with its default and description: their one home (config/lmp_node.yaml only
+overrides). Declared with cap_ros_common.parameters.declare_config."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from cap_ros_common.parameters import parameter
+
+
+@dataclass(frozen=True)
+class LmpNodeConfig:
+    llm_backend: str = parameter('cassette', 'cassette (replay a recorded cassette, offline) or http (an '
+                                 'OpenAI-compatible endpoint; CAP_LLM_BASE_URL, CAP_LLM_MODEL, CAP_LLM_API_KEY from '
+                                 'the environment unless set below).')
+    cassette: str = parameter('', 'Cassette file for llm_backend=cassette, or the file to record into with '
+                              "record_cassette=true; empty: the domain's packaged reference cassette.")
+    record_cassette: bool = parameter(False, 'With llm_backend=http: also record every answer into `cassette`.')
+    base_url: str = parameter('', 'OpenAI-compatible endpoint; empty: CAP_LLM_BASE_URL.')
+    model: str = parameter('', 'Model name; empty: CAP_LLM_MODEL.')
+    api: str = parameter('chat', 'chat (chat completions) or completions (legacy completions).')
+    request_timeout_s: float = parameter(60.0, 'Timeout of one model request [s].')
+    time_limit_s: float = parameter(300.0, 'Wall-clock limit of one generated program, robot motion included [s].')
+    service_timeout_s: float = parameter(5.0, 'Timeout of one perception request [s].')
+    motion_timeout_s: float = parameter(180.0, 'Timeout of one pick-and-place [s].')
+    max_queued_commands: int = parameter(5, 'Commands that may wait while one runs; more are refused.')
+    domain: str = parameter('tabletop', 'Robot domain of the prompts, robot API and scene (see '
+                            'cap_lmp_ros.domains.registry.domain_names()).')
+    sandbox_process: bool = parameter(True, 'Run generated programs in a sandbox process of their own (a crash or a '
+                                      'stuck C call then costs the session, not the node); false: in this process '
+                                      '(faster to start, for debugging).')
+    stall_limit_s: float = parameter(10.0, 'With sandbox_process: kill the sandbox process when one operation holds '
+                                     'it this long without a pause [s].')
+    jail: str = parameter('required', 'With sandbox_process: the kernel jail of the sandbox process (no file writes, '
+                          'sockets, exec or new processes): required (the node does not start without it), '
+                          'best_effort (what the kernel offers, the rest logged) or off.')
+    model_time_limit_s: float = parameter(120.0, 'Overall model time per command [s].')
+
+
+# Parameters whose change at run time takes effect from the next command; any other change is rejected.
+RUNTIME_PARAMETERS = ('max_queued_commands', 'service_timeout_s', 'motion_timeout_s')

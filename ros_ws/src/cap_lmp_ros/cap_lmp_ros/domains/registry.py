@@ -1,0 +1,120 @@
+"""The robot domains lmp_node can run, each as one unit: its engine, its robot API over ROS, its scene, its cassette.
+
+A built-in domain is a sub-package of cap_lmp_ros.domains with a `domain.py` that defines `DOMAIN` (a Domain):
+adding a domain is adding a folder. Others are added with `register_domain`. No rclpy here, nor in what a Domain
+names for the sandbox process (`build_engine` and its module); only `robot_api`, called in the node, may reach it.
+"""
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import pkgutil
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping, Protocol
+
+from cap_lmp.engine import Engine
+from cap_lmp.isolated_engine import builder_reference
+
+
+class RobotBinding(Protocol):
+    """A domain's robot API bound to the graph, as lmp_node uses it."""
+
+    service_timeout_s: float  # settable while the node runs
+    motion_timeout_s: float
+    stop_requested: Any  # a threading.Event, set by stop() and cleared before each command
+
+    def functions(self) -> dict[str, Callable[..., Any]]:
+        """The names generated code sees, bound to the graph."""
+        ...
+
+    def stop(self) -> None:
+        """Stop waiting for the robot and cancel the motion in progress (thread-safe)."""
+        ...
+
+
+# build_engine(api: Mapping[str, Callable], client: LLMClient, limits: SandboxLimits | None, **options) -> Engine:
+# a module-level function, so the sandbox process can import it.
+EngineBuilder = Callable[..., Engine]
+# robot_api(node, say_publisher, service_timeout_s, motion_timeout_s) -> RobotBinding
+RobotApiFactory = Callable[[Any, Any, float, float], RobotBinding]
+
+
+@dataclass(frozen=True)
+class Domain:
+    """One robot domain. `robot_functions` are the names `robot_api(...).functions()` binds over ROS; `scene` names
+    the simulator scene it runs in; `cassette` is the replay cassette used when none is configured."""
+
+    name: str
+    build_engine: EngineBuilder
+    robot_functions: tuple[str, ...]
+    robot_api: RobotApiFactory
+    scene: str
+    cassette: Path
+
+    def __post_init__(self) -> None:
+        builder_reference(self.build_engine)  # a one-line ValueError now, not when the sandbox process starts
+
+
+_domains: dict[str, Domain] = {}
+_lock = threading.Lock()
+_discovered = False
+
+
+def _discover() -> None:
+    """Register every sub-package of cap_lmp_ros.domains that has a domain.py defining DOMAIN (once)."""
+    global _discovered
+    with _lock:
+        if _discovered:
+            return
+        _discovered = True
+        package = importlib.import_module('cap_lmp_ros.domains')
+        for module in pkgutil.iter_modules(package.__path__):
+            if not module.ispkg:
+                continue
+            name = f'{package.__name__}.{module.name}.domain'
+            if importlib.util.find_spec(name) is None:
+                continue
+            domain = getattr(importlib.import_module(name), 'DOMAIN', None)
+            if isinstance(domain, Domain):
+                _domains.setdefault(domain.name, domain)
+
+
+def register_domain(domain: Domain, *, replace: bool = False) -> None:
+    """Make `domain` known by its name; ValueError if another domain has that name (unless `replace`)."""
+    _discover()
+    with _lock:
+        known = _domains.get(domain.name)
+        if known is not None and known != domain and not replace:
+            raise ValueError(f'a domain named {domain.name!r} is registered already')
+        _domains[domain.name] = domain
+
+
+def get_domain(name: str) -> Domain:
+    """The domain called `name`; ValueError (one line, naming the known domains) if there is none."""
+    _discover()
+    with _lock:
+        domain = _domains.get(name)
+        if domain is None:
+            raise ValueError(f'unknown domain {name!r}; known domains: {", ".join(sorted(_domains)) or "none"}')
+        return domain
+
+
+def domain_names() -> list[str]:
+    """The names of every known domain, sorted."""
+    _discover()
+    with _lock:
+        return sorted(_domains)
+
+
+def engine_api(domain: Domain, functions: Mapping[str, Callable[..., Any]]) -> dict[str, Callable[..., Any]]:
+    """The robot functions of `domain` out of a binding's `functions()`; ValueError naming any that are missing."""
+    missing = [name for name in domain.robot_functions if name not in functions]
+    if missing:
+        raise ValueError(f'the robot API of domain {domain.name!r} lacks {", ".join(missing)}')
+    return {name: functions[name] for name in domain.robot_functions}
+
+
+__all__ = ['Domain', 'EngineBuilder', 'RobotApiFactory', 'RobotBinding', 'domain_names', 'engine_api', 'get_domain',
+           'register_domain']

@@ -1,0 +1,25 @@
+"""The table-top domain as a unit: the table-top LMPs, the robot API over perception and pick_place, the
+'tabletop' simulator scene and the packaged reference cassette. No rclpy at import: the ROS binding is imported
+when the node builds it."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from cap_lmp_ros.domains.registry import Domain, RobotBinding
+from cap_lmp_ros.domains.tabletop.lmps import build_engine
+
+# The names RosTabletopApi binds over ROS; the pure helpers (denormalize_xy, ...) are added by build_engine.
+ROBOT_FUNCTIONS = ('get_obj_names', 'get_obj_pos', 'get_bbox', 'get_color', 'is_obj_visible', 'put_first_on_second',
+                   'say')
+
+
+def robot_api(node: Any, say_publisher: Any, service_timeout_s: float, motion_timeout_s: float) -> RobotBinding:
+    """RosTabletopApi on `node`."""
+    from cap_lmp_ros.domains.tabletop.robot_api import RosTabletopApi
+    return RosTabletopApi(node, say_publisher, service_timeout_s, motion_timeout_s)
+
+
+DOMAIN = Domain(name='tabletop', build_engine=build_engine, robot_functions=ROBOT_FUNCTIONS, robot_api=robot_api,
+                scene='tabletop',
+                cassette=Path(__file__).resolve().parent / 'cassettes' / 'tabletop_reference.yaml')
