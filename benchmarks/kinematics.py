@@ -14,15 +14,15 @@ from cap_control.kinematics import (
     HOME_JOINTS, forward_kinematics, inverse_kinematics, pose_error, top_down_pose, top_down_reach_margin,
 )
 from cap_control.pick_place import ObjectInfo, plan_pick_place
+from cap_tabletop.objects import BLOCK_SIZE
+from cap_tabletop.workspace import (
+    CORNERS, MIDDLE, SIDES, SPAWN_X_RANGE, SPAWN_Y_RANGE, TABLE_X_RANGE, TABLE_Y_RANGE, TABLE_Z,
+)
 
 POSES = 1000
-TABLE_X, TABLE_Y = (-0.3, 0.3), (-0.8, -0.2)
-BLOCK_CENTRE_HEIGHT = 0.02
-NAMED_POSITIONS = {
-    'top left corner': (-0.25, -0.25), 'top side': (0.0, -0.25), 'top right corner': (0.25, -0.25),
-    'left side': (-0.25, -0.5), 'middle': (0.0, -0.5), 'right side': (0.25, -0.5),
-    'bottom left corner': (-0.25, -0.75), 'bottom side': (0.0, -0.75), 'bottom right corner': (0.25, -0.75),
-}
+TABLE_X, TABLE_Y = TABLE_X_RANGE, TABLE_Y_RANGE
+BLOCK_CENTRE_HEIGHT = TABLE_Z + BLOCK_SIZE / 2
+NAMED_POSITIONS = {**CORNERS, **SIDES, 'middle': MIDDLE}
 
 
 def percentile_us(samples: list[float], q: float) -> float:
@@ -50,8 +50,8 @@ def main() -> None:
 
     plan_times = []
     for _ in range(20):
-        obj = ObjectInfo('block', (rng.uniform(-0.2, 0.2), rng.uniform(-0.7, -0.3), 0.02), (0.04, 0.04, 0.04),
-                         yaw=rng.uniform(-math.pi, math.pi))
+        obj = ObjectInfo('block', (rng.uniform(*SPAWN_X_RANGE), rng.uniform(*SPAWN_Y_RANGE), BLOCK_CENTRE_HEIGHT),
+                         (BLOCK_SIZE,) * 3, yaw=rng.uniform(-math.pi, math.pi))
         start = time.perf_counter()
         plan = plan_pick_place(obj, (rng.uniform(-0.25, 0.25), rng.uniform(-0.75, -0.25)), HOME_JOINTS)
         plan_times.append(time.perf_counter() - start)
@@ -66,7 +66,7 @@ def main() -> None:
                                               for p, a in zip(position_errors, angle_errors))),
         'table_reach_margin_min_m': round(min(margins), 4),
         'table_reach_margin_min_at_xy': [round(v, 3) for v in tightest],
-        'table_far_corner_distance_m': round(math.hypot(0.3, 0.8), 4),
+        'table_far_corner_distance_m': round(math.hypot(max(map(abs, TABLE_X)), max(map(abs, TABLE_Y))), 4),
         'named_position_reach_margin_m': {name: round(top_down_reach_margin((x, y, BLOCK_CENTRE_HEIGHT)), 4)
                                           for name, (x, y) in NAMED_POSITIONS.items()},
         'pick_place_plan_ms_p50': round(float(np.percentile(plan_times, 50)) * 1e3, 1),

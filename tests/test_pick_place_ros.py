@@ -222,7 +222,7 @@ def test_what_perception_reports_wrongly_fails_with_a_reason(ros_context, spin_u
         Parameter('real_time', value=True), Parameter('real_time_factor', value=4.0)])
     perception = PerceptionNode(context=ros_context, parameter_overrides=[
         Parameter('source', value='stub'), Parameter('stub_file', value=str(stub))])
-    pick_place = PickPlaceNode(context=ros_context, parameter_overrides=[Parameter('workspace_y_min', value=-1.2)])
+    pick_place = PickPlaceNode(context=ros_context, parameter_overrides=[Parameter('workspace.y_min', value=-1.2)])
     client = Node('pick_place_test_client', context=ros_context)
     action = ActionClient(client, PickPlace, GraphNames.PICK_PLACE_ACTION)
     executor = MultiThreadedExecutor(num_threads=8, context=ros_context)
@@ -258,9 +258,10 @@ CORNERS = [(-0.25, -0.25), (0.25, -0.25), (-0.25, -0.75), (0.25, -0.75)]
 def test_fifty_random_single_pick_and_place_episodes(ros_context, spin_until, source, required, agreement):
     """50 seeded episodes of the default scene: a random block onto a random bowl, block or free corner.
 
-    Success as the benchmark defines "on / in" (cap_bench/success.py): within 0.06 m of a bowl's or corner's centre, within 0.04 m of a
-    block and higher than it; and no other object moved more than 0.05 m. Required: at least 49 of 50 with the
-    simulator's ground truth as perception, 48 of 50 with the RGB-D colour detector on the top camera.
+    Success as the benchmark defines "on / in" (cap_bench/success.py): within 0.06 m of a bowl's or corner's
+    centre, within 0.04 m of a block and higher than it; and no other object moved more than 0.05 m. Required: at
+    least 49 of 50 with the simulator's ground truth as perception, 48 of 50 with the RGB-D colour detector on the
+    top camera.
     """
     bridge = SimBridgeNode(context=ros_context, parameter_overrides=[
         Parameter('camera_rate', value=10.0 if source == 'rgbd' else 0.0), Parameter('cameras', value=['top']),

@@ -1,7 +1,7 @@
 """Pick-and-place as a plan of stages: which motions, gripper commands and checks move an object onto a target.
 
 The plan is pure data computed before anything moves, so that an unreachable pose or a target outside the
-workspace is reported before the arm starts. An executor (the ROS node) runs the stages in order:
+workspace is reported before the arm starts. The executor (cap_control.pick_place_executor) runs the stages:
 
     for stage in plan.stages:                      # feedback: stage.name; cancel is honoured between stages
         for step in stage.steps:
@@ -37,13 +37,15 @@ from dataclasses import dataclass, field
 from typing import Sequence, Union
 
 import numpy as np
+from cap_ros_common.parameters import parameter
+from cap_tabletop.workspace import TABLE_X_RANGE, TABLE_Y_RANGE, TABLE_Z
 
 from cap_control.kinematics import (
     DEFAULT_TOOL_OFFSET, IKError, forward_kinematics, inverse_kinematics, joint_distance, top_down_pose,
 )
 from cap_control.trajectory import (
-    UR5E_LIMITS, CartesianLimits, JointLimits, JointTrajectory, TrajectoryError, cartesian_line, time_joint_path,
-    trajectory_tcp_positions,
+    DEFAULT_PERIOD, UR5E_LIMITS, CartesianLimits, JointLimits, JointTrajectory, TrajectoryError, cartesian_line,
+    time_joint_path, trajectory_tcp_positions,
 )
 
 
@@ -93,13 +95,14 @@ CATEGORY_BOWL = 'bowl'
 class Workspace:
     """Where the arm may pick and place: the table-top rectangle [m, world frame] and its surface height."""
 
-    x_min: float = -0.3
-    x_max: float = 0.3
-    y_min: float = -0.8
-    y_max: float = -0.2
-    table_z: float = 0.0
-    # Lowest TCP height above the table: the finger pads reach 12.5 mm below the TCP.
-    min_tcp_height: float = 0.016
+    x_min: float = parameter(TABLE_X_RANGE[0], 'Workspace (table-top) bounds, world frame [m]; objects and targets '
+                             'outside are refused.')
+    x_max: float = parameter(TABLE_X_RANGE[1], 'See x_min.')
+    y_min: float = parameter(TABLE_Y_RANGE[0], 'See x_min.')
+    y_max: float = parameter(TABLE_Y_RANGE[1], 'See x_min.')
+    table_z: float = parameter(TABLE_Z, 'Height of the table surface [m].')
+    # The finger pads reach 12.5 mm below the TCP.
+    min_tcp_height: float = parameter(0.016, 'Lowest tool-centre-point height above the table [m].')
 
     def contains_xy(self, x: float, y: float) -> bool:
         return self.x_min <= x <= self.x_max and self.y_min <= y <= self.y_max
@@ -170,56 +173,63 @@ def yaw_of_quaternion(x: float, y: float, z: float, w: float) -> float:
 
 @dataclass(frozen=True)
 class PickPlaceConfig:
-    """Heights, gripper settings, checks and motion limits of pick-and-place [m, rad, N, s]."""
+    """Heights, gripper settings, checks and motion limits of pick-and-place [m, rad, N, s].
+
+    Every field but joint_limits and clear_view_from is a parameter of the pick_place node, under its field name
+    (workspace and cartesian_limits as dotted names: workspace.x_min, cartesian_limits.speed).
+    """
 
     workspace: Workspace = Workspace()
-    tool_offset: float = DEFAULT_TOOL_OFFSET
-    # TCP height while travelling (at least), and the gap kept between the held object and anything below it.
-    travel_height: float = 0.25
-    travel_clearance: float = 0.05
-    # Grasp point: this fraction of the object's height above its bottom.
-    grasp_height_fraction: float = 0.5
-    # Largest opening of the gripper, and the room needed on either side of an object to close around it.
-    gripper_open_width: float = 0.085
-    gripper_side_room: float = 0.01
-    # Opening on release: the object's width plus this on each side (a fully opened gripper could push a bowl's wall).
-    release_side_room: float = 0.01
-    grip_force: float = 20.0
-    # Grasp verified when the fingers stop within this of the object's width, stalled on it if required.
-    grasp_width_tolerance: float = 0.012
-    require_stalled: bool = True
-    # Release height above the expected contact; a bowl's floor is taken this far above its bottom.
-    place_clearance: float = 0.005
-    bowl_floor_thickness: float = 0.01
-    # Thickness of a finger outside its pad; and the room beside the fingers beyond which all grasp or place yaws
-    # count as equally clear of the objects around.
-    finger_thickness: float = 0.014
-    finger_room: float = 0.03
+    tool_offset: float = parameter(DEFAULT_TOOL_OFFSET, 'Tool centre point along the flange z axis [m].')
+    travel_height: float = parameter(0.25, 'Lowest tool height while carrying or approaching [m].')
+    travel_clearance: float = parameter(0.05, 'Gap kept under a carried object over the tallest other object [m].')
+    grasp_height_fraction: float = parameter(0.5, 'Grasp point: this fraction of the object\'s height above its '
+                                             'bottom.')
+    gripper_open_width: float = parameter(0.085, 'Opening of the open gripper [m].')
+    gripper_side_room: float = parameter(0.01, 'Room needed on either side of an object to close around it [m].')
+    # A fully opened gripper could push a bowl's wall.
+    release_side_room: float = parameter(0.01, 'Opening on release: the object\'s width plus this on each side [m].')
+    grip_force: float = parameter(20.0, 'Grip force per finger when grasping [N].')
+    grasp_width_tolerance: float = parameter(0.012, 'A grasp is verified when the fingers stop within this of the '
+                                             'object\'s width [m].')
+    require_stalled: bool = parameter(True, 'A grasp counts only if the fingers stalled on the object.')
+    place_clearance: float = parameter(0.005, 'Release height above the expected contact [m].')
+    bowl_floor_thickness: float = parameter(0.01, 'A bowl\'s floor is taken this far above its bottom [m].')
+    finger_thickness: float = parameter(0.014, 'Thickness of a finger outside its pad [m]; grasp and place yaws keep '
+                                        'the fingers clear of neighbouring objects.')
+    finger_room: float = parameter(0.03, 'Room beside the fingers beyond which every grasp or place yaw counts as '
+                                   'clear [m].')
     # Camera position (world) that perception watches the table from, or None. When set, after placing the tool
-    # moves this far sideways at travel height, out of that camera's line of sight to what it just placed, so that
-    # perception sees the new stack rather than remembering its blocks where they were.
+    # moves clear_view_distance sideways at travel height, out of that camera's line of sight to what it just
+    # placed, so that perception sees the new stack rather than remembering its blocks where they were.
     clear_view_from: tuple[float, float, float] | None = None
-    clear_view_distance: float = 0.20  # [m]; 0.12 left far targets on the centre line hidden by the forearm
-    # Tracking error [rad] that the executor reads as contact during a stop-on-contact descent.
-    contact_tolerance: float = 0.002
-    # After retreating, the object must lie this close (xy) to the target object; farther, it was dropped on the
-    # way. Placed at a point of the table, it must lie within point_place_tolerance of it.
-    place_tolerance: float = 0.08
-    point_place_tolerance: float = 0.03
-    # A target is allowed only where the whole placed object stays this far inside the table's edges.
-    edge_margin: float = 0.01
-    # ... and off the footprints of the other blocks by this much (0: not overlapping them): set down on another
-    # block's edge, a block slides off and ends beside it, 1.4-3.5 cm from the point, or leaning on it, tilted.
-    target_room: float = 0.0
-    # Placed at a point, the object must rest on the table: its centre at most this much above half its height.
-    resting_tolerance: float = 0.015
-    # Largest sag of a joint-space move below its endpoints' height before a straight line is used instead.
-    allowed_sag: float = 0.03
+    # 0.12 left far targets on the centre line hidden by the forearm.
+    clear_view_distance: float = parameter(0.20, 'How far sideways the tool moves after placing to clear the '
+                                           'camera\'s view (with clear_view) [m].')
+    contact_tolerance: float = parameter(0.002, 'Joint tracking error read as contact while placing [rad] (sent as '
+                                         'the path tolerance of the place descent).')
+    # After retreating, an object placed on a target object farther than this was dropped on the way.
+    place_tolerance: float = parameter(0.08, 'Largest xy distance of the placed object from the target object [m] '
+                                       'before the result reports it dropped.')
+    point_place_tolerance: float = parameter(0.03, 'Largest xy distance of an object placed at a point of the table '
+                                             'from that point [m] before the result reports a failure.')
+    edge_margin: float = parameter(0.01, 'Room kept between a placed object\'s footprint and the table\'s edges '
+                                   '[m]; a target that leaves less is refused (OUTSIDE_WORKSPACE).')
+    # Set down on another block's edge, a block slides off and ends beside it, 1.4-3.5 cm from the point, or
+    # leaning on it, tilted.
+    target_room: float = parameter(0.0, 'Room kept between a point target and the footprints of the other blocks '
+                                   '[m] (0: not overlapping them).')
+    resting_tolerance: float = parameter(0.015, 'Placed at a point, the object must rest on the table: its centre '
+                                         'at most this much above half its height [m].')
+    allowed_sag: float = parameter(0.03, 'Largest sag of a joint-space move below its endpoints\' height before a '
+                                   'straight line is used instead [m].')
     joint_limits: JointLimits = UR5E_LIMITS
     cartesian_limits: CartesianLimits = CartesianLimits()
-    period: float = 0.01
-    # An actual start farther than this [rad] from a step's planned start makes the step be planned again.
-    replan_tolerance: float = 0.01
+    # The robot's controller and the unit tests run on the same points.
+    trajectory_period: float = parameter(DEFAULT_PERIOD, 'Time between trajectory points sent to the controller '
+                                         '[s].')
+    replan_tolerance: float = parameter(0.01, 'An actual start farther than this from a step\'s planned start makes '
+                                        'the step be planned again [rad].')
 
 
 @dataclass
@@ -381,8 +391,9 @@ class PickPlacePlan:
         try:
             if step.cartesian:
                 return cartesian_line(actual, step.goal_pose, self.config.joint_limits, self.config.cartesian_limits,
-                                      self.config.period, self.config.tool_offset)
-            return time_joint_path([actual, step.goal_joints], self.config.joint_limits, self.config.period)
+                                      self.config.trajectory_period, self.config.tool_offset)
+            return time_joint_path([actual, step.goal_joints], self.config.joint_limits,
+                                   self.config.trajectory_period)
         except (IKError, TrajectoryError) as error:
             raise PickPlaceError(PickPlaceErrorCode.IK_FAILED, f'cannot move on from the actual position: {error}')
 
@@ -420,7 +431,8 @@ class _Planner:
     def joint_move(self, xyz: Sequence[float], yaw: float, what: str) -> TrajectoryStep:
         goal = self.solve(xyz, yaw, what)
         try:
-            trajectory = time_joint_path([self.joints, goal], self.config.joint_limits, self.config.period)
+            trajectory = time_joint_path([self.joints, goal], self.config.joint_limits,
+                                         self.config.trajectory_period)
         except TrajectoryError as error:
             raise PickPlaceError(PickPlaceErrorCode.IK_FAILED, f'cannot move to {what}: {error}')
         self.joints = trajectory.end
@@ -430,7 +442,7 @@ class _Planner:
         pose = top_down_pose(xyz, yaw)
         try:
             trajectory = cartesian_line(self.joints, pose, self.config.joint_limits, self.config.cartesian_limits,
-                                        self.config.period, self.config.tool_offset)
+                                        self.config.trajectory_period, self.config.tool_offset)
         except (IKError, TrajectoryError) as error:
             raise PickPlaceError(PickPlaceErrorCode.IK_FAILED,
                                  f'cannot move straight to {what} at {np.round(xyz, 3).tolist()}: {error}')

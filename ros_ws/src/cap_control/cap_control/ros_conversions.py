@@ -4,7 +4,7 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
-from builtin_interfaces.msg import Duration
+from cap_ros_common.time import duration_msg, to_seconds
 from geometry_msgs.msg import Point
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
@@ -13,15 +13,13 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 from cap_interfaces.action import FollowJointTrajectory, GripperCommand
 from cap_interfaces.msg import JointTolerance
 from cap_interfaces.msg import ObjectState as ObjectStateMsg
-from cap_control.pick_place import GripperStep, ObjectInfo, TrajectoryStep, yaw_of_quaternion
+from cap_interfaces.srv import GetObjectState
+
+from cap_control.pick_place import ObjectInfo, yaw_of_quaternion
+from cap_control.pick_place_executor import ArmOutcome, ArmResult, ObjectReport
 from cap_control.trajectory import JointTrajectory
 
 GRIPPER_FINGER_JOINTS = ('gripper_left_finger_joint', 'gripper_right_finger_joint')
-
-
-def duration_msg(seconds: float) -> Duration:
-    nanoseconds = int(round(seconds * 1e9))
-    return Duration(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
 
 
 def trajectory_msg(trajectory: JointTrajectory) -> JointTrajectoryMsg:
@@ -32,18 +30,31 @@ def trajectory_msg(trajectory: JointTrajectory) -> JointTrajectoryMsg:
                               trajectory.accelerations)])
 
 
-def follow_trajectory_goal(step: TrajectoryStep, trajectory: JointTrajectory) -> FollowJointTrajectory.Goal:
-    """The goal for one trajectory step; a stop-on-contact step gets a path tolerance of its contact tolerance, so
-    that the controller aborts with PATH_TOLERANCE_VIOLATED where the arm touches down."""
+def follow_trajectory_goal(trajectory: JointTrajectory,
+                           contact_tolerance: float | None = None) -> FollowJointTrajectory.Goal:
+    """The goal for one trajectory; with a contact tolerance [rad], that is its path tolerance, so that the
+    controller aborts with PATH_TOLERANCE_VIOLATED where the arm touches down."""
     goal = FollowJointTrajectory.Goal(trajectory=trajectory_msg(trajectory))
-    if step.stop_on_contact:
-        goal.path_tolerance = [JointTolerance(name=name, position=step.contact_tolerance, velocity=-1.0,
+    if contact_tolerance is not None:
+        goal.path_tolerance = [JointTolerance(name=name, position=contact_tolerance, velocity=-1.0,
                                               acceleration=-1.0) for name in trajectory.joint_names]
     return goal
 
 
-def gripper_goal(step: GripperStep) -> GripperCommand.Goal:
-    return GripperCommand.Goal(position=float(step.position), max_effort=float(step.max_effort))
+def arm_outcome(result: FollowJointTrajectory.Result) -> ArmOutcome:
+    """The trajectory action's result as the executor's outcome (a tolerance violation may mean contact)."""
+    code = result.error_code
+    if code == FollowJointTrajectory.Result.SUCCESSFUL:
+        return ArmOutcome(ArmResult.SUCCEEDED)
+    message = result.error_string or f'error code {code}'
+    if code in (FollowJointTrajectory.Result.PATH_TOLERANCE_VIOLATED,
+                FollowJointTrajectory.Result.GOAL_TOLERANCE_VIOLATED):
+        return ArmOutcome(ArmResult.TOLERANCE_VIOLATED, message)
+    return ArmOutcome(ArmResult.FAILED, message)
+
+
+def gripper_goal(position: float, max_effort: float) -> GripperCommand.Goal:
+    return GripperCommand.Goal(position=float(position), max_effort=float(max_effort))
 
 
 def object_info(state: ObjectStateMsg) -> ObjectInfo:
@@ -53,6 +64,16 @@ def object_info(state: ObjectStateMsg) -> ObjectInfo:
     return ObjectInfo.from_bounding_box(
         state.name, (state.bbox_min.x, state.bbox_min.y, state.bbox_min.z),
         (state.bbox_max.x, state.bbox_max.y, state.bbox_max.z), state.category, yaw)
+
+
+def object_report(response: GetObjectState.Response) -> ObjectReport:
+    """Perception's answer about one object as the executor's report."""
+    if not response.success:
+        return ObjectReport(False, response.message, stamp=to_seconds(response.stamp))
+    state = response.state
+    return ObjectReport(True, response.message, object_info(state),
+                        (state.position.x, state.position.y, state.position.z), bool(state.visible),
+                        to_seconds(response.stamp))
 
 
 def joint_positions(msg: JointState, names: Sequence[str]) -> np.ndarray | None:
@@ -72,7 +93,3 @@ def gripper_opening(msg: JointState) -> float | None:
 def point_msg(xyz: Sequence[float]) -> Point:
     return Point(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
 
-
-def seconds(stamp) -> float:
-    """A builtin_interfaces/Time in seconds."""
-    return stamp.sec + stamp.nanosec * 1e-9

@@ -16,13 +16,15 @@ from typing import Sequence
 
 import numpy as np
 import ruckig
+from cap_ros_common.parameters import parameter
 from scipy.spatial.transform import Rotation, Slerp
 
 from cap_control.kinematics import (
     DEFAULT_TOOL_OFFSET, JOINT_LOWER, JOINT_NAMES, JOINT_UPPER, forward_kinematics, inverse_kinematics,
 )
 
-DEFAULT_PERIOD = 0.01
+# Time between the points of a timed trajectory [s]: what the arm's controller is sent.
+DEFAULT_PERIOD = 0.02
 
 
 class TrajectoryError(RuntimeError):
@@ -58,10 +60,10 @@ UR5E_LIMITS = JointLimits(
 class CartesianLimits:
     """Limits of the TCP along a straight line: linear [m/s, m/s^2, m/s^3] and angular speed [rad/s]."""
 
-    speed: float = 0.25
-    acceleration: float = 1.0
-    jerk: float = 10.0
-    angular_speed: float = 1.0
+    speed: float = parameter(0.25, 'Tool speed on straight descents and lifts [m/s].')
+    acceleration: float = parameter(1.0, 'Tool acceleration on straight lines [m/s^2].')
+    jerk: float = parameter(10.0, 'Tool jerk on straight lines [m/s^3].')
+    angular_speed: float = parameter(1.0, 'Tool turning speed on straight lines [rad/s].')
 
 
 @dataclass

@@ -1,0 +1,475 @@
+"""Carrying out a pick-and-place over ports to the arm, the gripper and perception (plain Python, no ROS).
+
+`PickPlaceExecutor.run` looks the object and target up, plans (cap_control.pick_place) before anything moves, then
+runs the stages one by one, reporting each stage. A cancel or a stop (`Interruption`) cancels the running arm or
+gripper goal at once (the arm holds where it is) and ends the run with CANCELLED.
+
+A target the plan refuses (off the table's usable area, or on another block: OUTSIDE_WORKSPACE) ends the run before
+the arm moves, with a message that names the target and what is allowed. After the retreat the executor waits for
+perception to answer from an observation made after it, and a placed object seen off the table or away from its
+target fails the run (OBJECT_DROPPED), so the result agrees with where the object really is.
+
+Every wait is on an event: a port's future completing, an interruption, or a timeout; none polls. The ports are
+small abstract classes that the ROS node implements over its action clients, services and /joint_states, and unit
+tests implement with fakes.
+"""
+from __future__ import annotations
+
+import abc
+import dataclasses
+import enum
+import threading
+import time
+from concurrent.futures import Future
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+import numpy as np
+from cap_ros_common.parameters import parameter
+from cap_tabletop.cameras import CAMERAS, DEFAULT_CAMERA
+
+from cap_control.pick_place import (
+    GripperStep, ObjectInfo, Observation, PickPlaceConfig, PickPlaceError, PickPlaceErrorCode, PickPlacePlan,
+    Stage, StageName, TrajectoryStep, plan_pick_place,
+)
+from cap_control.trajectory import JointTrajectory
+
+# Perception has no push for "a newer observation": after the retreat it is asked again this often [s] (a camera
+# frame comes every 0.1 s at most).
+FRESH_VIEW_RETRY = 0.02
+
+
+@dataclass(frozen=True)
+class ExecutionConfig:
+    """How long the executor waits for each kind of answer [s]; parameters of the pick_place node."""
+
+    service_timeout: float = parameter(5.0, 'Longest wait for a perception answer, or for the arm or gripper to '
+                                       'accept a goal or a cancel [s].')
+    server_timeout: float = parameter(10.0, 'Longest wait for the arm and gripper action servers, the perception '
+                                      'services and the arm\'s joint state to appear [s].')
+    motion_timeout_margin: float = parameter(30.0, 'Wall time allowed beyond a motion\'s planned duration before '
+                                             'TIMEOUT [s].')
+    gripper_timeout: float = parameter(15.0, 'Longest wait for a gripper command [s].')
+    view_timeout: float = parameter(3.0, 'Longest wait after the retreat for perception to answer from an '
+                                    'observation made after it (with clear_view: after the tool cleared the '
+                                    'camera\'s view) [s].')
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    """Node parameters that shape PickPlaceConfig's joint limits and clear_view_from."""
+
+    velocity_scale: float = parameter(1.0, 'Fraction of the UR5e joint speed (180 deg/s) used, in (0, 1].')
+    acceleration_scale: float = parameter(1.0, 'Fraction of the joint acceleration (3 rad/s^2) and jerk '
+                                          '(30 rad/s^3) limits used, in (0, 1].')
+    clear_view: bool = parameter(False, 'After placing, move the tool sideways out of the line of sight of the '
+                                 'camera at camera_position, so camera-based perception sees what was just placed.')
+    camera_position: tuple[float, ...] = parameter(CAMERAS[DEFAULT_CAMERA].position, 'Where the camera perception '
+                                                   'watches the table from (world frame) [m]; used with clear_view. '
+                                                   'The default is the simulated top camera.')
+
+    def apply(self, config: PickPlaceConfig) -> PickPlaceConfig:
+        """`config` with the scaled joint limits and, with clear_view, the camera to keep out of the view of."""
+        if self.clear_view and len(self.camera_position) != 3:
+            raise ValueError(f'camera_position must be x, y, z, not {list(self.camera_position)}')
+        camera = tuple(float(v) for v in self.camera_position) if self.clear_view else None
+        return dataclasses.replace(config, joint_limits=config.joint_limits.scaled(self.velocity_scale,
+                                                                                   self.acceleration_scale),
+                                   clear_view_from=camera)
+
+
+# ----------------------------------------------------------------------------------------------------- ports
+class ArmResult(enum.Enum):
+    SUCCEEDED = 'succeeded'
+    TOLERANCE_VIOLATED = 'tolerance violated'  # the arm strayed from the path, or ended short of its goal
+    FAILED = 'failed'
+
+
+@dataclass(frozen=True)
+class ArmOutcome:
+    result: ArmResult
+    message: str = ''  # why, when not SUCCEEDED
+
+
+@dataclass(frozen=True)
+class GripperOutcome:
+    width: float  # opening the fingers ended at [m]
+    stalled: bool  # they stopped on something before the commanded opening
+
+
+@dataclass(frozen=True)
+class ObjectReport:
+    """Perception's answer about one object."""
+
+    success: bool
+    message: str = ''
+    info: ObjectInfo | None = None  # the object as the planner takes it
+    position: tuple[float, float, float] | None = None  # where perception reports it
+    visible: bool = False  # False: perception only remembers where it was last seen
+    stamp: float = 0.0  # time of the observation answered from [s]; 0: the source has no time stamps
+
+
+class PendingGoal(abc.ABC):
+    """A goal sent to the arm or the gripper."""
+
+    @property
+    @abc.abstractmethod
+    def accepted(self) -> Future:
+        """Completes with True (accepted) or False (refused)."""
+
+    @property
+    @abc.abstractmethod
+    def result(self) -> Future:
+        """Completes with the outcome (ArmOutcome or GripperOutcome) once an accepted goal ends."""
+
+    @abc.abstractmethod
+    def cancel(self) -> Future:
+        """Ask the server to cancel; completes once it has taken the cancel (it then holds where it is)."""
+
+
+class Arm(abc.ABC):
+    server_description = 'the arm controller'  # named in "... is not available"
+    joints_description = 'the arm joints'
+
+    @abc.abstractmethod
+    def server_ready(self) -> Future:
+        """Completes once the trajectory server can take goals."""
+
+    @abc.abstractmethod
+    def joints(self) -> Future:
+        """Completes with the arm's joint positions (np.ndarray) once they are known."""
+
+    @abc.abstractmethod
+    def opening(self) -> float | None:
+        """The finger opening read from the joint state now [m], None if unknown."""
+
+    @abc.abstractmethod
+    def state_time(self) -> float | None:
+        """Time stamp of the latest joint state [s], None if none came yet."""
+
+    @abc.abstractmethod
+    def follow(self, trajectory: JointTrajectory, contact_tolerance: float | None) -> PendingGoal:
+        """Send a timed trajectory; with a contact tolerance [rad], a tracking error above it aborts the motion."""
+
+
+class Gripper(abc.ABC):
+    server_description = 'the gripper'
+
+    @abc.abstractmethod
+    def server_ready(self) -> Future:
+        """Completes once the gripper server can take goals."""
+
+    @abc.abstractmethod
+    def command(self, position: float, max_effort: float) -> PendingGoal:
+        """Move the fingers to `position` [m] with at most `max_effort` [N] (0: the gripper's default)."""
+
+
+class Perception(abc.ABC):
+    service_description = 'the perception service'
+
+    @abc.abstractmethod
+    def state_service_ready(self) -> Future:
+        """Completes once the object state service can be called."""
+
+    @abc.abstractmethod
+    def names_available(self) -> bool:
+        """Whether the object names service can be called now (it is not waited for)."""
+
+    @abc.abstractmethod
+    def object_names(self) -> Future:
+        """Completes with the names of the objects in view now (list[str])."""
+
+    @abc.abstractmethod
+    def object_state(self, name: str) -> Future:
+        """Completes with an ObjectReport."""
+
+
+# ----------------------------------------------------------------------------------------------------- runs
+@dataclass(frozen=True)
+class PickPlaceRequest:
+    object_name: str
+    target_name: str = ''  # empty: place at target_xy
+    target_xy: tuple[float, float] = (0.0, 0.0)
+
+
+class Ending(enum.Enum):
+    SUCCEEDED = 'succeeded'
+    FAILED = 'failed'
+    CANCELLED = 'cancelled'  # by a cancel request
+    STOPPED = 'stopped'  # by a stop request
+
+
+@dataclass(frozen=True)
+class PickPlaceOutcome:
+    ending: Ending
+    code: PickPlaceErrorCode
+    message: str = ''
+    final_position: tuple[float, float, float] | None = None
+
+
+class Interruption:
+    """Cancel and stop requests for one run, and the condition every wait of the run sleeps on."""
+
+    def __init__(self) -> None:
+        self.condition = threading.Condition()
+        self.reason: Ending | None = None
+
+    def cancel(self) -> None:
+        self._set(Ending.CANCELLED)
+
+    def stop(self) -> None:
+        self._set(Ending.STOPPED)
+
+    def _set(self, reason: Ending) -> None:
+        with self.condition:
+            if self.reason is None:
+                self.reason = reason
+            self.condition.notify_all()
+
+    def notify(self, *_: Any) -> None:
+        """Wake the waits (a future's done callback)."""
+        with self.condition:
+            self.condition.notify_all()
+
+
+class _Interrupted(Exception):
+    pass
+
+
+class _Failed(Exception):
+    def __init__(self, code: PickPlaceErrorCode, message: str):
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+
+FeedbackCallback = Callable[[StageName, float], None]
+
+
+class PickPlaceExecutor:
+    """Runs pick-and-place requests one at a time over the ports."""
+
+    def __init__(self, arm: Arm, gripper: Gripper, perception: Perception, config: PickPlaceConfig,
+                 timeouts: ExecutionConfig = ExecutionConfig(), stop_source: str = 'a stop request',
+                 log: Callable[[str, str], None] | None = None):
+        self.arm, self.gripper, self.perception = arm, gripper, perception
+        self.config, self.timeouts = config, timeouts
+        self.stop_source = stop_source  # named in the message of a stopped run
+        self._log = log or (lambda level, message: None)
+
+    def run(self, request: PickPlaceRequest, interruption: Interruption,
+            feedback: FeedbackCallback = lambda stage, progress: None) -> PickPlaceOutcome:
+        run = _Run(self, interruption)
+        try:
+            plan = run.plan(request)
+            run.execute(plan, feedback)
+            final = run.object_state(plan.object.name)
+            self._log('info', f'placed the {plan.object.name} on {plan.target_description}')
+            return PickPlaceOutcome(Ending.SUCCEEDED, PickPlaceErrorCode.NONE, '',
+                                    final.position if final.success else None)
+        except _Interrupted:
+            run.cancel_active_goal()
+            if interruption.reason == Ending.CANCELLED:
+                return PickPlaceOutcome(Ending.CANCELLED, PickPlaceErrorCode.CANCELLED,
+                                        'cancelled: the arm stopped where it was')
+            return PickPlaceOutcome(Ending.STOPPED, PickPlaceErrorCode.CANCELLED,
+                                    f'stopped by {self.stop_source}: the arm stopped where it was')
+        except (_Failed, PickPlaceError) as failure:
+            run.cancel_active_goal()
+            self._log('warning', f'pick-and-place failed: {failure.message}')
+            return PickPlaceOutcome(Ending.FAILED, failure.code, failure.message)
+
+
+class _Run:
+    """One request's waits, steps and checks."""
+
+    def __init__(self, executor: PickPlaceExecutor, interruption: Interruption):
+        self.executor = executor
+        self.arm, self.gripper, self.perception = executor.arm, executor.gripper, executor.perception
+        self.timeouts = executor.timeouts
+        self.interruption = interruption
+        self.active: PendingGoal | None = None  # the arm or gripper goal running now (cancelled on interrupt)
+
+    # ------------------------------------------------------------------------------------------- waiting
+    def _check_interrupted(self) -> None:
+        if self.interruption.reason is not None:
+            raise _Interrupted()
+
+    def wait(self, future: Future, timeout: float, failure: str) -> Any:
+        """The future's result; raises _Interrupted on cancel/stop and _Failed(TIMEOUT, failure) after `timeout`."""
+        condition = self.interruption.condition
+        future.add_done_callback(self.interruption.notify)
+        deadline = time.monotonic() + timeout
+        with condition:
+            while not future.done():
+                self._check_interrupted()
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise _Failed(PickPlaceErrorCode.TIMEOUT, failure)
+                condition.wait(left)
+        return future.result()
+
+    def answer(self, future: Future, timeout: float, what: str) -> Any:
+        return self.wait(future, timeout, f'no answer from {what} within {timeout:.0f} s')
+
+    def available(self, future: Future, what: str) -> None:
+        self.wait(future, self.timeouts.server_timeout, f'{what} is not available')
+
+    def pause(self, seconds: float) -> None:
+        """Wait `seconds`, or less if interrupted (then raise)."""
+        with self.interruption.condition:
+            self._check_interrupted()
+            self.interruption.condition.wait(seconds)
+        self._check_interrupted()
+
+    # ------------------------------------------------------------------------------------------- perception
+    def object_state(self, name: str) -> ObjectReport:
+        self.available(self.perception.state_service_ready(), self.perception.service_description)
+        return self.answer(self.perception.object_state(name), self.timeouts.service_timeout, 'perception')
+
+    def objects_in_view(self, exclude: str) -> list[ObjectInfo] | None:
+        """The other objects in view: the carried object passes over them and the fingers keep clear of them.
+
+        Objects perception only remembers (not in view now) are left out: their last known place may be stale.
+        None when perception cannot list them.
+        """
+        if not self.perception.names_available():
+            return None
+        names = self.answer(self.perception.object_names(), self.timeouts.service_timeout, 'perception')
+        others = []
+        for name in names:
+            if name == exclude:
+                continue
+            report = self.object_state(name)
+            if report.success and report.visible:
+                others.append(report.info)
+        return others
+
+    def current_joints(self) -> np.ndarray:
+        return np.asarray(self.wait(self.arm.joints(), self.timeouts.server_timeout,
+                                    f'{self.arm.joints_description} is not available'), dtype=float)
+
+    # ------------------------------------------------------------------------------------------- plan and run
+    def plan(self, request: PickPlaceRequest) -> PickPlacePlan:
+        found = self.object_state(request.object_name)
+        if not found.success:
+            raise _Failed(PickPlaceErrorCode.OBJECT_NOT_FOUND, found.message or
+                          f'no object named {request.object_name!r}')
+        target: ObjectInfo | Sequence[float]
+        if request.target_name:
+            target_found = self.object_state(request.target_name)
+            if not target_found.success:
+                raise _Failed(PickPlaceErrorCode.TARGET_NOT_FOUND, target_found.message or
+                              f'no object named {request.target_name!r}')
+            target = target_found.info
+        else:
+            target = request.target_xy
+        others = self.objects_in_view(found.info.name)
+        obstacle_height = max((other.top for other in others), default=None) if others is not None else None
+        return plan_pick_place(found.info, target, self.current_joints(), self.executor.config, obstacle_height,
+                               others or ())
+
+    def execute(self, plan: PickPlacePlan, feedback: FeedbackCallback) -> None:
+        observation = Observation()
+        done = 0.0
+        for stage in plan.stages:
+            self._check_interrupted()
+            feedback(stage.name, float(done))
+            for step in stage.steps:
+                if isinstance(step, TrajectoryStep):
+                    self.move(plan, step)
+                else:
+                    self.grip(step, observation)
+            if stage.name == StageName.RETREAT:
+                # The outcome is judged on what perception sees after the retreat, not on what it last saw.
+                self.wait_for_fresh_view(plan.object.name)
+            self.check(plan, stage, observation)
+            done = stage.progress
+        feedback(plan.stages[-1].name, 1.0)
+
+    def _send(self, goal: PendingGoal, what: str, refusal: str) -> None:
+        if not self.answer(goal.accepted, self.timeouts.service_timeout, what):
+            raise _Failed(PickPlaceErrorCode.UNKNOWN, refusal)
+        self.active = goal
+
+    def move(self, plan: PickPlacePlan, step: TrajectoryStep) -> None:
+        trajectory = plan.trajectory_for(step, self.current_joints())
+        if len(trajectory) < 2:
+            return
+        self.available(self.arm.server_ready(), self.arm.server_description)
+        goal = self.arm.follow(trajectory, step.contact_tolerance if step.stop_on_contact else None)
+        self._send(goal, 'the arm controller', 'the arm controller refused the trajectory')
+        outcome: ArmOutcome = self.answer(goal.result, trajectory.duration + self.timeouts.motion_timeout_margin,
+                                          'the arm controller')
+        self.active = None
+        if outcome.result == ArmResult.SUCCEEDED:
+            return
+        if step.stop_on_contact and outcome.result == ArmResult.TOLERANCE_VIOLATED:
+            # Touched down before the planned height (on the way, or in the last millimetres, where the arm ends
+            # a few milliradians short of its goal): placing ends here.
+            self.executor._log('debug', f'touched down: {outcome.message}')
+            return
+        raise _Failed(PickPlaceErrorCode.UNKNOWN, f'the arm did not complete its motion: {outcome.message}')
+
+    def grip(self, step: GripperStep, observation: Observation) -> None:
+        self.available(self.gripper.server_ready(), self.gripper.server_description)
+        goal = self.gripper.command(step.position, step.max_effort)
+        self._send(goal, 'the gripper', 'the gripper refused the command')
+        outcome: GripperOutcome = self.answer(goal.result, self.timeouts.gripper_timeout, 'the gripper')
+        self.active = None
+        observation.gripper_position = outcome.width
+        observation.gripper_stalled = outcome.stalled
+
+    def wait_for_fresh_view(self, name: str) -> None:
+        """Wait until perception answers from an observation made after the retreat (and so after the tool cleared
+        the camera's view, with clear_view).
+
+        Otherwise the check after it, and the next command, would see the placed object where perception last saw
+        it (a camera: before the tool moved out of its view; the simulator's objects: up to a publishing period
+        ago). A source without time stamps (stamp 0, e.g. a stub) is not waited for.
+        """
+        cleared_at = self.arm.state_time()
+        if cleared_at is None:
+            return
+        deadline = time.monotonic() + self.timeouts.view_timeout
+        while True:
+            report = self.object_state(name)
+            if not report.success:
+                return  # perception no longer knows it: the check says so
+            if report.stamp == 0.0:
+                return
+            if report.stamp >= cleared_at:
+                if not report.visible:
+                    self.executor._log('warning', f'the {name} is out of the camera\'s sight after placing; its '
+                                       f'position is the one last seen')
+                return
+            if time.monotonic() > deadline:
+                self.executor._log('warning', f'perception saw nothing newer than the place within '
+                                   f'{self.timeouts.view_timeout:.0f} s; going on with what it has')
+                return
+            self.pause(FRESH_VIEW_RETRY)
+
+    def check(self, plan: PickPlacePlan, stage: Stage, observation: Observation) -> None:
+        if not stage.checks:
+            return
+        if not any(isinstance(step, GripperStep) for step in stage.steps):
+            opening = self.arm.opening()
+            if opening is not None:
+                observation.gripper_position = opening
+        if any(check.needs_object_position for check in stage.checks):
+            seen = self.object_state(plan.object.name)
+            observation.object_position = seen.position if seen.success else None
+            observation.object_visible = bool(seen.success and seen.visible)
+        for check in stage.checks:
+            failure = check.failure(observation)
+            if failure:
+                raise _Failed(stage.failure_code, failure)
+
+    def cancel_active_goal(self) -> None:
+        goal, self.active = self.active, None
+        if goal is None:
+            return
+        # The controller holds the arm (or the fingers) where they are; answer only once it has taken the cancel.
+        done = threading.Event()
+        goal.cancel().add_done_callback(lambda _: done.set())
+        done.wait(self.timeouts.service_timeout)

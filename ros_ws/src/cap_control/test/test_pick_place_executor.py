@@ -1,0 +1,262 @@
+"""The pick-and-place executor over fakes of its ports: results, messages and the motions that reach the arm."""
+from __future__ import annotations
+
+import math
+import threading
+from concurrent.futures import Future
+
+import numpy as np
+import pytest
+
+from cap_control.kinematics import HOME_JOINTS, forward_kinematics
+from cap_control.pick_place import ObjectInfo, PickPlaceConfig, PickPlaceErrorCode, StageName
+from cap_control.pick_place_executor import (
+    Arm, ArmOutcome, ArmResult, Ending, ExecutionConfig, Gripper, GripperOutcome, Interruption, ObjectReport,
+    PendingGoal, Perception, PickPlaceExecutor, PickPlaceRequest,
+)
+
+BLOCK = (0.04, 0.04, 0.04)
+# Short waits: a fake that never answers should end the run soon.
+TIMEOUTS = ExecutionConfig(service_timeout=0.05, server_timeout=0.05, motion_timeout_margin=5.0,
+                           gripper_timeout=5.0, view_timeout=0.05)
+
+
+def done(value=None) -> Future:
+    future: Future = Future()
+    future.set_result(value)
+    return future
+
+
+class FakeGoal(PendingGoal):
+    def __init__(self, outcome=None):
+        self._accepted, self._result = done(True), Future()
+        self.cancelled = threading.Event()
+        if outcome is not None:
+            self._result.set_result(outcome)
+
+    @property
+    def accepted(self) -> Future:
+        return self._accepted
+
+    @property
+    def result(self) -> Future:
+        return self._result
+
+    def cancel(self) -> Future:
+        self.cancelled.set()
+        return done()
+
+
+class FakeWorld(Arm, Gripper, Perception):
+    """Arm, gripper and perception of a table with objects: a closed gripper over a block holds it, and opening
+    it sets the block down under the tool. `contact_at_place` makes the place descent stop on contact half way;
+    `hang_in` names a stage whose motion never ends; `drop_to` is where a released block ends instead."""
+
+    def __init__(self, objects: list[ObjectInfo], stages: list[StageName]):
+        self.objects = {o.name: o for o in objects}
+        self.stages = stages  # the feedback so far
+        self.q = np.array(HOME_JOINTS, dtype=float)
+        self.opening_now = 0.085
+        self.held: str | None = None
+        self.trajectories: list[tuple[StageName, object, float | None]] = []
+        self.gripper_commands: list[tuple[float, float]] = []
+        self.goals: list[FakeGoal] = []
+        self.contact_at_place = False
+        self.hang_in: StageName | None = None
+        self.moving = threading.Event()
+        self.drop_to: tuple[float, float, float] | None = None
+        self.missing_object = False  # nothing between the fingers when they close
+        self.perception_answers = True
+
+    # arm
+    def server_ready(self) -> Future:
+        return done()
+
+    def joints(self) -> Future:
+        return done(self.q.copy())
+
+    def opening(self) -> float | None:
+        return self.opening_now
+
+    def state_time(self) -> float | None:
+        return 0.0
+
+    def follow(self, trajectory, contact_tolerance) -> PendingGoal:
+        stage = self.stages[-1]
+        self.trajectories.append((stage, trajectory, contact_tolerance))
+        if stage == self.hang_in:
+            goal = FakeGoal()
+            self.goals.append(goal)
+            self.moving.set()
+            return goal
+        if contact_tolerance is not None and self.contact_at_place:
+            self.q = trajectory.positions[len(trajectory) // 2].copy()
+            return FakeGoal(ArmOutcome(ArmResult.TOLERANCE_VIOLATED, 'path tolerance violated'))
+        self.q = trajectory.end.copy()
+        return FakeGoal(ArmOutcome(ArmResult.SUCCEEDED))
+
+    # gripper
+    def command(self, position: float, max_effort: float) -> PendingGoal:
+        self.gripper_commands.append((position, max_effort))
+        tcp = forward_kinematics(self.q)[:3, 3]
+        if position < 0.01:  # closing
+            under = [o for o in self.objects.values() if o.category == 'block'
+                     and math.dist(o.position[:2], tcp[:2]) < 0.01] if not self.missing_object else []
+            if under:
+                self.held = under[0].name
+                self.opening_now = under[0].size[1]
+                return FakeGoal(GripperOutcome(self.opening_now, True))
+            self.opening_now = position
+            return FakeGoal(GripperOutcome(position, False))
+        if self.held is not None:
+            held = self.objects[self.held]
+            where = self.drop_to or (float(tcp[0]), float(tcp[1]), 0.03)
+            self.objects[self.held] = ObjectInfo(held.name, where, held.size, held.category, held.yaw)
+            self.held = None
+        self.opening_now = position
+        return FakeGoal(GripperOutcome(position, False))
+
+    # perception
+    def state_service_ready(self) -> Future:
+        return done()
+
+    def names_available(self) -> bool:
+        return True
+
+    def object_names(self) -> Future:
+        return done(list(self.objects)) if self.perception_answers else Future()
+
+    def object_state(self, name: str) -> Future:
+        if not self.perception_answers:
+            return Future()
+        obj = self.objects.get(name)
+        if obj is None:
+            return done(ObjectReport(False, f'no object named {name!r}'))
+        return done(ObjectReport(True, '', obj, obj.position, True))
+
+    def stage_motions(self) -> list[StageName]:
+        return [stage for stage, _, _ in self.trajectories]
+
+
+@pytest.fixture
+def table():
+    stages: list[StageName] = []
+    world = FakeWorld([ObjectInfo('red block', (0.1, -0.5, 0.02), BLOCK),
+                       ObjectInfo('blue bowl', (-0.1, -0.6, 0.03), (0.14, 0.14, 0.06), 'bowl')], stages)
+    executor = PickPlaceExecutor(world, world, world, PickPlaceConfig(), TIMEOUTS, stop_source='/cap/stop')
+    return world, executor, stages
+
+
+def run(executor, stages, request, interruption=None):
+    interruption = interruption or Interruption()
+    return executor.run(request, interruption, lambda stage, progress: stages.append(stage))
+
+
+def test_a_block_goes_into_the_bowl_through_every_stage(table):
+    world, executor, stages = table
+    outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
+    assert (outcome.ending, outcome.code, outcome.message) == (Ending.SUCCEEDED, PickPlaceErrorCode.NONE, '')
+    assert list(dict.fromkeys(stages)) == list(StageName)
+    assert math.dist(outcome.final_position[:2], (-0.1, -0.6)) < 0.01
+    assert set(world.stage_motions()) == {StageName.APPROACH, StageName.DESCEND, StageName.LIFT, StageName.MOVE,
+                                          StageName.PLACE, StageName.RETREAT}
+    # Only the place descent stops on contact, with the configured tolerance; the gripper closes with the grip
+    # force and releases wider than the block.
+    assert [(stage, tolerance) for stage, _, tolerance in world.trajectories if tolerance is not None] == \
+        [(StageName.PLACE, PickPlaceConfig().contact_tolerance)]
+    assert world.gripper_commands[1] == (0.0, PickPlaceConfig().grip_force)
+    assert BLOCK[1] < world.gripper_commands[2][0] <= PickPlaceConfig().gripper_open_width
+
+
+def test_a_grasp_that_closes_on_nothing_fails_before_lifting(table):
+    world, executor, stages = table
+    world.missing_object = True
+    outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
+    assert (outcome.ending, outcome.code) == (Ending.FAILED, PickPlaceErrorCode.GRASP_MISSED)
+    assert 'grasp missed' in outcome.message
+    assert stages[-1] == StageName.VERIFY
+    assert world.stage_motions() == [StageName.APPROACH, StageName.DESCEND], 'nothing moves after the miss'
+
+
+@pytest.mark.parametrize('how', ['stop', 'cancel'])
+def test_a_stop_or_cancel_mid_motion_cancels_the_arm_goal_and_moves_nothing_more(table, how):
+    world, executor, stages = table
+    world.hang_in = StageName.MOVE
+    interruption = Interruption()
+    outcomes = []
+    runner = threading.Thread(target=lambda: outcomes.append(
+        run(executor, stages, PickPlaceRequest('red block', 'blue bowl'), interruption)))
+    runner.start()
+    assert world.moving.wait(30.0)
+    interruption.stop() if how == 'stop' else interruption.cancel()
+    runner.join(30.0)
+    (outcome,) = outcomes
+    assert outcome.code == PickPlaceErrorCode.CANCELLED
+    if how == 'stop':
+        assert (outcome.ending, outcome.message) == (Ending.STOPPED,
+                                                     'stopped by /cap/stop: the arm stopped where it was')
+    else:
+        assert (outcome.ending, outcome.message) == (Ending.CANCELLED, 'cancelled: the arm stopped where it was')
+    assert world.goals[-1].cancelled.is_set(), 'the running trajectory was cancelled'
+    assert world.stage_motions()[-1] == StageName.MOVE and stages[-1] == StageName.MOVE
+    assert world.held == 'red block'
+
+
+def test_contact_on_the_place_descent_ends_it_and_the_retreat_starts_where_the_arm_stopped(table):
+    world, executor, stages = table
+    world.contact_at_place = True
+    outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
+    assert outcome.code == PickPlaceErrorCode.NONE, outcome.message
+    place = [t for stage, t, _ in world.trajectories if stage == StageName.PLACE][0]
+    retreat = [t for stage, t, _ in world.trajectories if stage == StageName.RETREAT][0]
+    np.testing.assert_allclose(retreat.start, place.positions[len(place) // 2])
+
+
+def test_a_tracking_error_outside_the_place_descent_fails_the_motion(table):
+    world, executor, stages = table
+    world.contact_at_place = True
+    world.follow = lambda trajectory, tolerance: (world.trajectories.append((world.stages[-1], trajectory, tolerance))
+                                                  or FakeGoal(ArmOutcome(ArmResult.TOLERANCE_VIOLATED, 'strayed')))
+    outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
+    assert (outcome.code, outcome.message) == (PickPlaceErrorCode.UNKNOWN, 'the arm did not complete its motion: '
+                                                                          'strayed')
+    assert world.stage_motions() == [StageName.APPROACH]
+
+
+def test_a_block_that_ends_off_the_table_is_reported_dropped(table):
+    world, executor, stages = table
+    world.drop_to = (-0.1, -0.9, -0.3)
+    outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
+    assert (outcome.ending, outcome.code) == (Ending.FAILED, PickPlaceErrorCode.OBJECT_DROPPED)
+    assert 'the red block fell off the table' in outcome.message
+    assert stages[-1] == StageName.RETREAT
+
+
+def test_a_block_that_slips_while_lifting_is_reported_dropped(table):
+    world, executor, stages = table
+    # The fingers close on nothing once the arm has risen (the grasp itself was verified).
+    world.opening = lambda: 0.0 if world.stages[-1] == StageName.LIFT else world.opening_now
+    outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
+    assert (outcome.code, stages[-1]) == (PickPlaceErrorCode.OBJECT_DROPPED, StageName.LIFT)
+    assert 'slipped out of the gripper' in outcome.message
+
+
+def test_perception_that_does_not_answer_times_out_before_anything_moves(table):
+    world, executor, stages = table
+    world.perception_answers = False
+    outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
+    assert (outcome.code, outcome.message) == (PickPlaceErrorCode.TIMEOUT, 'no answer from perception within 0 s')
+    assert not world.trajectories and not world.gripper_commands and not stages
+
+
+@pytest.mark.parametrize('request_, code, words', [
+    (PickPlaceRequest('red block', '', (0.0, -1.0)), PickPlaceErrorCode.OUTSIDE_WORKSPACE, 'outside the workspace'),
+    (PickPlaceRequest('purple block', 'blue bowl'), PickPlaceErrorCode.OBJECT_NOT_FOUND, "'purple block'"),
+    (PickPlaceRequest('red block', 'pink bowl'), PickPlaceErrorCode.TARGET_NOT_FOUND, "'pink bowl'"),
+])
+def test_refused_requests_move_nothing(table, request_, code, words):
+    world, executor, stages = table
+    outcome = run(executor, stages, request_)
+    assert (outcome.ending, outcome.code) == (Ending.FAILED, code)
+    assert words in outcome.message
+    assert not world.trajectories and not world.gripper_commands and not stages
