@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import pathlib
 import time
 from typing import Callable, Iterator
 
@@ -28,6 +29,22 @@ def pytest_configure(config: pytest.Config) -> None:
     from cap_bringup.cpu_affinity import pin_to_one_cpu
 
     pin_to_one_cpu(0)
+
+
+def _brings_up_ros(item: pytest.Item) -> bool:
+    """Whether a test talks over DDS: its module uses rclpy or the lmp_node test graph, or it asks for ros_context."""
+    source = getattr(item.module, '__cap_source__', None) if hasattr(item, 'module') else ''
+    if source is None:
+        source = pathlib.Path(item.module.__file__).read_text(encoding='utf-8')
+        item.module.__cap_source__ = source
+    return 'ros_context' in getattr(item, 'fixturenames', ()) or 'rclpy' in source or 'lmp_graph' in source
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    # `make test-fast` deselects these: the integration tests in tests/ and every test that brings up ROS nodes.
+    for item in items:
+        if pathlib.Path(str(item.fspath)).parent.name == 'tests' or _brings_up_ros(item):
+            item.add_marker(pytest.mark.graph)
 
 
 @pytest.fixture(autouse=True)

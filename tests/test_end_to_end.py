@@ -98,10 +98,14 @@ def test_cap_stop_halts_the_arm_within_half_a_second_of_simulated_time(ros_conte
         assert np.allclose(world.joint_positions(), held, atol=1e-3)
         # Perception's answers reach every client of its services in the process; none of the graph's own
         # clients may sit on the multi-threaded executor, where each answer would cost a Python wait-set rebuild.
-        perception_services = {GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE}
-        on_busy_executor = [(node.get_name(), client.srv_name) for node in graph.graph.executor.get_nodes()
-                            for client in node.clients if client.srv_name in perception_services]
-        assert on_busy_executor == []
+        perception_services = {'/' + GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE,
+                               '/' + GraphNames.PERCEPTION_OBJECT_STATE_SERVICE}  # as resolved (no namespace)
+        executors = (graph.graph.executor, graph.graph.events_executor)
+        clients = [(node.get_name(), client.srv_name) for executor in executors for node in executor.get_nodes()
+                   for client in node.clients if client.srv_name in perception_services]
+        assert clients, 'the graph has perception clients'
+        assert [client for client in clients if client[0] in
+                {node.get_name() for node in graph.graph.executor.get_nodes()}] == []
     finally:
         graph.close()
 

@@ -127,3 +127,16 @@ def test_execute_action_can_be_cancelled(ros_context, spin_until):
         executor.shutdown()
         for node in nodes:
             node.destroy_node()
+
+
+def test_graph_names_are_relative_so_a_namespace_moves_them(ros_context):
+    names = {name: getattr(GraphNames, name) for name in dir(GraphNames)
+             if name.isupper() and isinstance(getattr(GraphNames, name), str)}
+    assert names and all(not value.startswith('/') for key, value in names.items() if key != 'CLOCK_TOPIC')
+    assert GraphNames.CLOCK_TOPIC == '/clock'  # rclpy's time source subscribes to it by this name
+    node = Node('names_check', namespace='/robot1', context=ros_context)
+    try:
+        publisher = node.create_publisher(String, GraphNames.COMMAND_TOPIC, COMMAND_QOS)
+        assert publisher.topic_name == '/robot1/cap/command'
+    finally:
+        node.destroy_node()

@@ -6,7 +6,8 @@ import xml.etree.ElementTree as ElementTree
 import pytest
 
 SRC = pathlib.Path(__file__).resolve().parents[1] / 'ros_ws' / 'src'
-PYTHON_PACKAGES = ('cap_lmp', 'cap_lmp_ros', 'cap_bringup', 'cap_tabletop', 'cap_ros_common', 'cap_perception', 'cap_control', 'cap_sim_bridge', 'cap_bench')
+PYTHON_PACKAGES = ('cap_ros_common', 'cap_tabletop', 'cap_lmp', 'cap_perception', 'cap_control', 'cap_sim_bridge',
+                   'cap_lmp_ros', 'cap_bringup', 'cap_bench')
 
 
 @pytest.mark.parametrize('package', PYTHON_PACKAGES)

@@ -1,5 +1,3 @@
-from glob import glob
-
 from setuptools import find_packages, setup
 
 package_name = 'cap_ros_common'
@@ -17,7 +15,7 @@ setup(
     zip_safe=False,
     maintainer='cap-ros maintainers',
     maintainer_email='maintainers@cap-ros.dev',
-    description='Small ROS helpers shared by the cap-ros nodes: parameters declared from a config dataclass, time conversions.',
+    description='ROS helpers of the cap-ros nodes: parameters declared from a config dataclass, time conversions.',
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

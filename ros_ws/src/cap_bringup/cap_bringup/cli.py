@@ -1,14 +1,16 @@
 """`cap`: the command line of cap-ros (works without ros2cli).
 
     cap up --seed 3                                  bring up the whole simulated graph (Ctrl-C stops it)
+    cap up --namespace robot1                        ... with every name under /robot1 (a second robot beside)
     cap send "put the red block in the blue bowl"   run a command, follow it to the end (exit 0: it ran to the end)
     cap stop                                         stop the running program and every motion
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
     cap demo                                         the table-top demo (see cap_bringup/demo.py)
     cap bench tabletop --trials 1                    the paper's table-top benchmark (see cap_bench/runner.py)
 
-Uses the ROS_DOMAIN_ID of the environment; discovery stays on this host unless ROS_AUTOMATIC_DISCOVERY_RANGE says
-otherwise.
+Every command takes --namespace (the graph's names are relative; `cap send --namespace robot1 "..."` talks to the
+graph brought up with `cap up --namespace robot1`). Uses the ROS_DOMAIN_ID of the environment; discovery stays on
+this host unless ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise.
 
 Exit codes: 0 done (for `cap send`: the program ran to the end and reported success); 1 failed (the program
 failed or was refused); 2 unreachable or misconfigured (nobody offers
@@ -88,7 +90,7 @@ class _Session:
 
     SLICE_S = 0.05  # longest wait inside rclpy: bounds how late a signal or a deadline is noticed
 
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, namespace: str = '') -> None:
         os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
         import rclpy
         from rclpy.context import Context
@@ -98,7 +100,8 @@ class _Session:
         self.signals = _signals()
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node(name, context=self.context)
+        # The graph's names are relative: a node in the graph's namespace finds them under it.
+        self.node = rclpy.create_node(name, context=self.context, namespace=_namespace(namespace))
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
@@ -119,6 +122,12 @@ class _Session:
         self.context.try_shutdown()
 
 
+def _namespace(namespace: str) -> str:
+    """'' or '/robot1' (what --namespace names; a leading slash is optional)."""
+    namespace = namespace.strip().strip('/')
+    return '/' + namespace if namespace else ''
+
+
 def _say(text: str, out=None) -> None:
     """Print a line that holds text from the graph (or from the user): never a raw control character."""
     print(terminal_text(text), file=out or sys.stdout, flush=True)
@@ -128,7 +137,7 @@ def _error(text: str) -> None:
     _say(text, sys.stderr)
 
 
-def send(command: str, server_timeout: float, timeout: float, out=None) -> int:
+def send(command: str, server_timeout: float, timeout: float, out=None, namespace: str = '') -> int:
     """Send one command through the /cap/execute action, print its progress and return the exit code.
 
     `timeout` [s] bounds the whole command, every phase included (finding lmp_node, the acknowledgement, the
@@ -143,7 +152,7 @@ def send(command: str, server_timeout: float, timeout: float, out=None) -> int:
 
     out = out or sys.stdout
     deadline = time.monotonic() + timeout
-    session = _Session('cap_send')
+    session = _Session('cap_send', namespace)
     client = ActionClient(session.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
     session.node.create_subscription(String, GraphNames.SAY_TOPIC, lambda m: _say(f'robot says: {m.data}', out),
                                      10)
@@ -211,7 +220,7 @@ def send(command: str, server_timeout: float, timeout: float, out=None) -> int:
         result = result_future.result().result
         # What the robot said came on another topic: lines still in flight would be lost when the process ends.
         session.spin_until(lambda: False, SAY_DRAIN_S)
-        if not result.success and result.message.startswith('refused'):
+        if result.outcome == ExecuteCommand.Result.OUTCOME_REFUSED:
             _say(result.message, out)  # says why (an empty command, a full queue, ...)
         else:
             _say(('success' if result.success else 'failed') + (f': {result.message}' if result.message else ''),
@@ -228,13 +237,13 @@ def send(command: str, server_timeout: float, timeout: float, out=None) -> int:
         session.close()
 
 
-def stop(server_timeout: float) -> int:
+def stop(server_timeout: float, namespace: str = '') -> int:
     """Publish on /cap/stop once somebody listens."""
     from std_msgs.msg import Empty
 
     from cap_interfaces.msg import GraphNames
 
-    session = _Session('cap_stop')
+    session = _Session('cap_stop', namespace)
     try:
         publisher = session.node.create_publisher(Empty, GraphNames.STOP_TOPIC, 10)
         if not session.spin_until(lambda: publisher.get_subscription_count() > 0, server_timeout):
@@ -252,7 +261,7 @@ def stop(server_timeout: float) -> int:
         session.close()
 
 
-def snapshot(cameras: Sequence[str], out_dir: pathlib.Path, server_timeout: float) -> int:
+def snapshot(cameras: Sequence[str], out_dir: pathlib.Path, server_timeout: float, namespace: str = '') -> int:
     """Save one colour image per camera as PNG."""
     import cv2
     from rclpy.qos import qos_profile_sensor_data
@@ -261,7 +270,7 @@ def snapshot(cameras: Sequence[str], out_dir: pathlib.Path, server_timeout: floa
     from cap_interfaces.msg import GraphNames
     from cap_perception.ros_conversions import image_to_array
 
-    session = _Session('cap_snapshot')
+    session = _Session('cap_snapshot', namespace)
     images: dict[str, Image] = {}
     try:
         for camera in cameras:
@@ -285,7 +294,7 @@ def snapshot(cameras: Sequence[str], out_dir: pathlib.Path, server_timeout: floa
 
 
 def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, cassette: str,
-       record: bool) -> int:
+       record: bool, namespace: str = '', domain: str = 'tabletop') -> int:
     """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM.
 
     Exits 0 when stopped by a signal, FATAL_EXIT_CODE (70) when a thread the graph depends on died (the graph no
@@ -308,13 +317,15 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
         try:
             graph = Graph(context, GraphOptions(seed=seed, objects=objects, real_time=real_time,
                                                 perception=perception, llm_backend=backend, cassette=cassette,
-                                                record_cassette=record))
+                                                record_cassette=record, namespace=namespace, domain=domain))
         except (ValueError, CapLLMError) as error:  # a configuration the user can fix: say what, in one line
             _error(f'error: {one_line(str(error))}')
             return EXIT_UNREACHABLE
         if signals.received is None:
-            _say(f'cap-ros is up (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}): '
-                 f'{", ".join(graph.nodes)}. Send commands with: cap send "..."  Stop with Ctrl-C.')
+            where = f', namespace {graph.namespace}' if graph.namespace else ''
+            flag = f' --namespace {graph.namespace.lstrip("/")}' if graph.namespace else ''
+            _say(f'cap-ros is up (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}{where}): '
+                 f'{", ".join(graph.nodes)}. Send commands with: cap send{flag} "..."  Stop with Ctrl-C.')
         while not signals.event.wait(0.2):
             if graph.failed.is_set():  # the graph has said why (stderr); a zombie graph must not live on
                 _say('shutting down: the graph no longer answers')
@@ -365,6 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='cap', description='Command a cap-ros robot in plain language.')
     commands = parser.add_subparsers(dest='command', required=True)
     p_up = commands.add_parser('up', help='bring up the simulated table-top graph (sim, perception, control, lmp)')
+    p_up.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_up.add_argument('--seed', type=int, default=0, help='scene seed [0]')
     p_up.add_argument('--objects', default='', help='comma-separated objects, e.g. "red block, blue bowl"')
     p_up.add_argument('--real-time', action='store_true', help='simulate in real time (default: as fast as possible)')
@@ -373,15 +385,20 @@ def build_parser() -> argparse.ArgumentParser:
                       help='cassette (offline replay) or http (CAP_LLM_BASE_URL, CAP_LLM_MODEL, CAP_LLM_API_KEY)')
     p_up.add_argument('--cassette', default='', help='cassette file (default: the packaged reference cassette)')
     p_up.add_argument('--record', action='store_true', help='with --backend http: record answers into --cassette')
+    p_up.add_argument('--domain', default='tabletop', help='the domain whose prompts, robot API and scene run '
+                      '[tabletop]')
     commands.add_parser('demo', help='run the table-top demo (options: cap demo --help)', add_help=False)
     commands.add_parser('bench', help='the paper\'s table-top benchmark (cap bench tabletop --help)', add_help=False)
     p_send = commands.add_parser('send', help='run a natural-language command and follow it to the end')
+    p_send.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_send.add_argument('text', help='the command, e.g. "put the red block in the blue bowl"')
     p_send.add_argument('--timeout', type=float, default=600.0, help='give up after this many seconds [600]')
     p_send.add_argument('--wait', type=float, default=10.0, help='wait this long for lmp_node [10 s]')
     p_stop = commands.add_parser('stop', help='stop the running program and every motion')
+    p_stop.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_stop.add_argument('--wait', type=float, default=5.0, help='wait this long for a listener [5 s]')
     p_snap = commands.add_parser('snapshot', help='save camera images as PNG')
+    p_snap.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_snap.add_argument('--camera', action='append', help='camera name (repeatable; default: front and top)')
     p_snap.add_argument('--out', type=pathlib.Path, default=pathlib.Path('snapshots'), help='output folder')
     p_snap.add_argument('--wait', type=float, default=10.0, help='wait this long for images [10 s]')
@@ -401,12 +418,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     _signals()  # from here on SIGINT / SIGTERM end the command cleanly (rclpy's imports take a while)
     if args.command == 'up':
-        return up(args.seed, args.objects, args.real_time, args.perception, args.backend, args.cassette, args.record)
+        return up(args.seed, args.objects, args.real_time, args.perception, args.backend, args.cassette, args.record,
+                  args.namespace, args.domain)
     if args.command == 'send':
-        return send(args.text, args.wait, args.timeout)
+        return send(args.text, args.wait, args.timeout, namespace=args.namespace)
     if args.command == 'stop':
-        return stop(args.wait)
-    return snapshot(args.camera or ['front', 'top'], args.out, args.wait)
+        return stop(args.wait, args.namespace)
+    return snapshot(args.camera or ['front', 'top'], args.out, args.wait, args.namespace)
 
 
 if __name__ == '__main__':

@@ -169,8 +169,13 @@ def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '
     from std_msgs.msg import String
 
     from cap_interfaces.action import ExecuteCommand
-    from cap_interfaces.msg import GraphNames, ObjectSpec, StatusEvent
+    from cap_interfaces.msg import GraphNames, ObjectSpec
     from cap_interfaces.srv import ResetScene
+
+    result_type = ExecuteCommand.Result
+    outcome_names = {result_type.OUTCOME_DONE: 'done', result_type.OUTCOME_ERROR: 'error',
+                     result_type.OUTCOME_CANCELLED: 'cancelled', result_type.OUTCOME_REFUSED: 'refused',
+                     result_type.OUTCOME_MODEL_ERROR: 'model error'}
     from cap_bringup.graph import Graph, GraphOptions
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -208,16 +213,13 @@ def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '
             _save_png(graph.world, out_dir / 'commands' / f'{index:02d}-before.png')
             said.clear()
             sim_started, wall_started = graph.world.time, time.monotonic()
-            stages: list[int] = []
-            goal = _call(execute.send_goal_async(ExecuteCommand.Goal(command=step.command),
-                                                 feedback_callback=lambda m: stages.append(m.feedback.status.stage)),
+            goal = _call(execute.send_goal_async(ExecuteCommand.Goal(command=step.command)),
                          30, 'lmp_node to accept the command')
             result = _call(goal.get_result_async(), 900, 'the command to finish').result
             time.sleep(0.2)  # let the last /cap/say message arrive
             after = _state(graph.world)
             _save_png(graph.world, out_dir / 'commands' / f'{index:02d}-after.png')
-            outcome = 'done' if result.success else (
-                'refused' if StatusEvent.STAGE_REFUSED in stages or 'refused' in result.message else 'error')
+            outcome = outcome_names.get(result.outcome, 'error')
             problems = [] if outcome == step.expect else [f'expected {step.expect}, got {outcome}']
             if step.message_must_name and step.message_must_name not in result.message:
                 problems.append(f'the message does not name {step.message_must_name!r}')

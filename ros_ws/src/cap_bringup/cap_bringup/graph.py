@@ -30,15 +30,49 @@ from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
 
 from cap_bringup.cpu_affinity import pin_to_one_cpu
+from cap_control.pick_place_node import PickPlaceNode
+from cap_interfaces.msg import GraphNames
+from cap_lmp_ros.domains.registry import get_domain
+from cap_lmp_ros.lmp_node import LmpNode
 from cap_lmp_ros.thread_watch import ThreadWatch
+from cap_perception.perception_node import PerceptionNode
+from cap_sim_bridge.bridge_node import SimBridgeNode
 
-# (node name, package, its config file, module, class), in start order: the simulator first, lmp_node last.
+# (node name, package, its config file, class), in start order: the simulator first, lmp_node last.
 NODES = (
-    ('sim_bridge', 'cap_sim_bridge', 'sim_bridge.yaml', 'cap_sim_bridge.bridge_node', 'SimBridgeNode'),
-    ('perception_node', 'cap_perception', 'perception.yaml', 'cap_perception.perception_node', 'PerceptionNode'),
-    ('pick_place', 'cap_control', 'pick_place.yaml', 'cap_control.pick_place_node', 'PickPlaceNode'),
-    ('lmp_node', 'cap_lmp_ros', 'lmp_node.yaml', 'cap_lmp_ros.lmp_node', 'LmpNode'),
+    ('sim_bridge', 'cap_sim_bridge', 'sim_bridge.yaml', SimBridgeNode),
+    ('perception_node', 'cap_perception', 'perception.yaml', PerceptionNode),
+    ('pick_place', 'cap_control', 'pick_place.yaml', PickPlaceNode),
+    ('lmp_node', 'cap_lmp_ros', 'lmp_node.yaml', LmpNode),
 )
+# Nodes that take their time from the simulator's /clock (the simulator itself keeps the wall clock it paces by).
+SIM_TIME_NODES = ('perception_node', 'pick_place', 'lmp_node')
+
+
+def namespace_arguments(namespace: str) -> dict[str, Any]:
+    """Node options that put a node under `namespace` ('' or '/robot1') with the clock of that namespace's simulator.
+
+    The graph's names are relative, so the namespace moves all of them; /clock is absolute (rclpy's time source
+    subscribes to it by that name), so it is remapped to <namespace>/clock: each graph has a simulator, and time,
+    of its own.
+    """
+    namespace = normalise_namespace(namespace)
+    if not namespace:
+        return {}
+    return {'namespace': namespace,
+            'cli_args': ['--ros-args', '-r', f'{GraphNames.CLOCK_TOPIC}:={namespace}{GraphNames.CLOCK_TOPIC}']}
+
+
+def normalise_namespace(namespace: str) -> str:
+    """'' (none) or '/name': a leading slash added, a trailing one removed; a bad name is a one-line ValueError."""
+    namespace = namespace.strip().strip('/')
+    if not namespace:
+        return ''
+    for part in namespace.split('/'):
+        if not part or not (part[0].isalpha() or part[0] == '_') or not all(c.isalnum() or c == '_' for c in part):
+            raise ValueError(f'namespace {namespace!r}: each part must start with a letter or _ and hold only '
+                             'letters, digits and _')
+    return '/' + namespace
 
 
 def is_quick(node_name: str, parameters: dict[str, Any]) -> bool:
@@ -64,19 +98,23 @@ class GraphOptions:
     camera_rate: float = 10.0  # [Hz of simulated time]; 0 = no images
     extra: dict[str, dict[str, Any]] = field(default_factory=dict)  # node name -> {parameter: value}
     cpu: int | None = 0  # the process is pinned to this one of its allowed CPUs (cpu_affinity.py); None: not pinned
+    namespace: str = ''  # e.g. 'robot1': every name of the graph under /robot1 (two graphs side by side)
+    domain: str = 'tabletop'  # the domain (cap_lmp_ros.domains) whose prompts, robot API and scene run
 
     def overrides(self) -> dict[str, dict[str, Any]]:
-        lmp = {'llm_backend': self.llm_backend, 'record_cassette': self.record_cassette}
+        lmp = {'llm_backend': self.llm_backend, 'record_cassette': self.record_cassette, 'domain': self.domain}
         if self.cassette:
             lmp['cassette'] = str(pathlib.Path(self.cassette).resolve())
         values = {
             'sim_bridge': {'seed': self.seed, 'objects': self.objects, 'real_time': self.real_time,
-                           'camera_rate': self.camera_rate},
+                           'camera_rate': self.camera_rate, 'scene': get_domain(self.domain).scene},
             'perception_node': {'source': self.perception},
             # A camera sees a fresh stack only once the tool has moved out of its line of sight.
             'pick_place': {'clear_view': self.perception == 'rgbd'},
             'lmp_node': lmp,
         }
+        for node in SIM_TIME_NODES:
+            values[node]['use_sim_time'] = True
         for node, parameters in self.extra.items():
             values.setdefault(node, {}).update(parameters)
         return values
@@ -211,8 +249,6 @@ class Graph:
     CLOSE_TIMEOUT_S = 5.0  # per stage: spinning threads, callbacks in flight
 
     def __init__(self, context, options: GraphOptions, num_threads: int = 8) -> None:
-        import importlib
-
         if options.cpu is not None:
             pin_to_one_cpu(options.cpu)  # before the graph's threads start, so that they inherit it
         self.context = context
@@ -221,6 +257,8 @@ class Graph:
         self._close_lock = threading.Lock()
         self._watch = ThreadWatch(on_death=self._on_thread_death)
         overrides = options.overrides()
+        self.namespace = normalise_namespace(options.namespace)
+        placed = namespace_arguments(self.namespace)
         self.executor = MultiThreadedExecutor(num_threads=num_threads, context=context)
         self._spinners = [Spinner(self.executor, context, 'graph_executor', self._watch),
                           Spinner(EventsExecutor(context=context), context, 'graph_events_executor', self._watch)]
@@ -228,23 +266,27 @@ class Graph:
         self.api_node = None  # the robot API's clients, on the events executor
         self.control_clients_node = None  # pick-and-place's perception clients, on the events executor
         try:
-            for node_name, package, config_file, module_name, class_name in NODES:
-                node_class = getattr(importlib.import_module(module_name), class_name)
+            for node_name, package, config_file, node_class in NODES:
                 from_config = config_parameters(package, config_file)
                 values = {**from_config.get('/**', {}), **from_config.get(node_name, {}),
                           **overrides.get(node_name, {})}
                 # lmp_node's worker thread reports its death to the graph's watch, like the executors' threads.
                 watched = {'thread_watch': self._watch} if node_name == 'lmp_node' else {}
                 node = node_class(context=context, parameter_overrides=[
-                    Parameter(name, value=value) for name, value in values.items()], **watched)
+                    Parameter(name, value=value) for name, value in values.items()], **placed, **watched)
                 self.nodes[node_name] = node
                 (quick if is_quick(node_name, values) else self.executor).add_node(node)
             # Perception's answers reach every client of its services in the process, waking each client's
             # executor: all of them live on the events executor, where a wake-up for another client is cheap.
-            self.api_node = rclpy.create_node('lmp_node_robot_api', context=context)
+            sim_time = [Parameter('use_sim_time', value=True)]
+            self.api_node = rclpy.create_node('lmp_node_robot_api', context=context, parameter_overrides=sim_time,
+                                              **placed)
             quick.add_node(self.api_node)
-            self.nodes['lmp_node'].robot.bind_clients(self.api_node)
-            self.control_clients_node = rclpy.create_node('pick_place_perception_clients', context=context)
+            bind_clients = getattr(self.nodes['lmp_node'].robot, 'bind_clients', None)
+            if bind_clients is not None:  # a domain's binding may keep its clients on lmp_node itself
+                bind_clients(self.api_node)
+            self.control_clients_node = rclpy.create_node('pick_place_perception_clients', context=context,
+                                                          parameter_overrides=sim_time, **placed)
             quick.add_node(self.control_clients_node)
             self.nodes['pick_place'].bind_perception_clients(self.control_clients_node)
         except BaseException:
@@ -260,6 +302,11 @@ class Graph:
 
     def __exit__(self, *_exc) -> None:
         self.close()
+
+    @property
+    def events_executor(self):
+        """The executor of the quick request-response path (perception's services, the robot API's clients)."""
+        return self._spinners[1].executor
 
     @property
     def world(self):

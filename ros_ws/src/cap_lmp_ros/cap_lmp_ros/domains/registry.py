@@ -118,3 +118,10 @@ def engine_api(domain: Domain, functions: Mapping[str, Callable[..., Any]]) -> d
 
 __all__ = ['Domain', 'EngineBuilder', 'RobotApiFactory', 'RobotBinding', 'domain_names', 'engine_api', 'get_domain',
            'register_domain']
+
+
+def unregister_domain(name: str) -> None:
+    """Forget a registered domain (tests that register a toy domain clean up with this)."""
+    _discover()
+    with _lock:
+        _domains.pop(name, None)
