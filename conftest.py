@@ -43,7 +43,7 @@ def _brings_up_ros(item: pytest.Item) -> bool:
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     # `make test-fast` deselects these: the integration tests in tests/ and every test that brings up ROS nodes.
     for item in items:
-        if pathlib.Path(str(item.fspath)).parent.name == 'tests' or _brings_up_ros(item):
+        if item.path.parent.name == 'tests' or _brings_up_ros(item):
             item.add_marker(pytest.mark.graph)
 
 

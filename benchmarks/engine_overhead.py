@@ -26,7 +26,7 @@ from cap_lmp.cassette import HAND_WRITTEN, Cassette, CassetteClient, CassetteEnt
 from cap_lmp.prompts import load_prompt
 from cap_lmp_ros.domains.tabletop.lmps import PROMPTS_DIR
 from cap_lmp.sandbox import SandboxLimits
-from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
+from cap_lmp_ros.domains.tabletop.lmps import build_engine
 from cap_lmp_ros.testing.table import Table
 
 SCENE = {'blue block': (-0.15, -0.35), 'red block': (0.0, -0.4), 'green block': (0.15, -0.45),
@@ -123,7 +123,7 @@ def main() -> None:
         path = Path(folder) / 'benchmark.yaml'
         Cassette(path, cassette_entries()).save()
         table = Table.with_objects(SCENE)
-        engine = build_tabletop_engine(table.api(), CassetteClient(path))
+        engine = build_engine(table.api(), CassetteClient(path))
         overhead_ms, total_ms, model_ms, execute_ms = [], [], [], []
         calls = 0
         for i in range(args.warmup + args.n):

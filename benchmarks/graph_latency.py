@@ -38,6 +38,7 @@ from cap_interfaces.msg import GraphNames  # noqa: E402
 from cap_interfaces.srv import GetObjectState  # noqa: E402
 from cap_bringup.graph import Graph, GraphOptions  # noqa: E402
 from cap_lmp_ros.lmp_node import COMMAND_QOS  # noqa: E402
+from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT
 
 OBJECTS = 'red block, blue block, green block, red bowl, blue bowl, green bowl'
 PROGRAMS = {
@@ -79,7 +80,7 @@ def main() -> None:
                         'a robot runs); the physics thread then competes with the nodes for the interpreter')
     args = parser.parse_args()
     cassette = pathlib.Path(tempfile.mkdtemp()) / 'bench.yaml'
-    cassette.write_text(yaml.safe_dump({'format': 'cap-llm-cassette/1', 'entries': [
+    cassette.write_text(yaml.safe_dump({'format': CASSETTE_FORMAT, 'entries': [
         {'lmp': 'tabletop_ui', 'query': q, 'context': '*', 'completion': c,
          'source': 'written by hand as a reference program'} for q, c in PROGRAMS.items()]}))
     context = Context()

@@ -39,7 +39,7 @@ if [ "$(cat ros_ws/install/.cap-source 2>/dev/null)" != "$src_hash" ]; then
   step "building ros_ws with colcon"
   (
     export VIRTUAL_ENV=$VENV PATH=$VENV/bin:$PATH
-    # The venv is the ament prefix: without this CMake finds no rosidl package (ROS_ON_PIP.md, fix 1).
+    # The venv is the ament prefix: without this CMake finds no rosidl package (the ROS wheels' CMake files look for packages under it).
     export AMENT_PREFIX_PATH=$VENV CMAKE_PREFIX_PATH=$VENV
     cd ros_ws
     colcon --log-base log build --symlink-install --event-handlers console_cohesion- summary+ \

@@ -37,6 +37,8 @@ from cap_bench.report import write_report
 from cap_bench.success import check
 from cap_bench.templates import GROUPS, TEMPLATES
 from cap_lmp.safe_text import terminal_text
+from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT
+from cap_tabletop.cameras import DEFAULT_CAMERA
 
 SETTLE_S = 0.5  # simulated time the scene settles after the program before it is judged
 MAX_DOMAIN_ID = 232  # the largest ROS_DOMAIN_ID whose DDS ports are valid
@@ -100,7 +102,7 @@ def write_oracle_cassette(episodes: Iterable[Episode], path: pathlib.Path) -> No
             'lmp': 'tabletop_ui', 'query': episode.instruction, 'context': '*',
             'source': f'written by hand as a reference program (cap_bench oracle, {episode.template})',
             'completion': oracle_program(episode)}
-    path.write_text(yaml.safe_dump({'format': 'cap-llm-cassette/1', 'entries': list(entries.values())},
+    path.write_text(yaml.safe_dump({'format': CASSETTE_FORMAT, 'entries': list(entries.values())},
                                    sort_keys=False, width=120))
 
 
@@ -140,7 +142,7 @@ class _EpisodeRunner:
         self.graph = Graph(self.context, GraphOptions(
             perception=options.perception, llm_backend='cassette' if options.policy == 'oracle' else 'http',
             cassette=str(cassette) if cassette else '', camera_rate=10.0 if options.perception == 'rgbd' else 0.0,
-            extra={'lmp_node': lmp, 'sim_bridge': {'cameras': ['top']}}, cpu=cpu))
+            extra={'lmp_node': lmp, 'sim_bridge': {'cameras': [DEFAULT_CAMERA]}}, cpu=cpu))
         self.node = rclpy.create_node('cap_bench', context=self.context)
         self.graph.executor.add_node(self.node)
         self.execute = ActionClient(self.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
@@ -218,13 +220,13 @@ class _EpisodeRunner:
         verdict = check(episode, initial, final)
         done = result.outcome == self.ExecuteCommand.Result.OUTCOME_DONE
         record.update(code=result.code, success=bool(done and verdict.success),
-                      outcome=_outcome_name(self.ExecuteCommand.Result, result.outcome),
+                      outcome=outcome_name(result.outcome),
                       sim_seconds=world.time - sim_started, wall_seconds=time.monotonic() - wall_started,
                       model_calls=result.model_calls, prompt_tokens=result.prompt_tokens,
                       completion_tokens=result.completion_tokens,
                       final_state={k: [round(float(v), 4) for v in p] for k, p in final.items()})
         if not done:
-            record['reason'] = f'{_outcome_reason(self.ExecuteCommand.Result, result.outcome)}: {result.message}'
+            record['reason'] = f'{_outcome_reason(result.outcome)}: {result.message}'
         elif not verdict.success:
             record['reason'] = f'the final state is wrong: {verdict.reason}'
         return record
@@ -235,20 +237,19 @@ class _EpisodeRunner:
         self.context.try_shutdown()
 
 
-def _outcome_name(result_type: Any, outcome: int) -> str:
-    """'done', 'error', 'cancelled', 'refused' or 'model_error' for ExecuteCommand.Result.OUTCOME_* values."""
-    for name in dir(result_type):
-        if name.startswith('OUTCOME_') and getattr(result_type, name) == outcome:
-            return name[len('OUTCOME_'):].lower()
-    return f'unknown ({outcome})'
-
-
 _OUTCOME_REASONS = {'error': 'the program failed', 'cancelled': 'the command was cancelled',
                     'refused': 'the command was refused', 'model_error': 'the model gave no usable answer'}
 
 
-def _outcome_reason(result_type: Any, outcome: int) -> str:
-    name = _outcome_name(result_type, outcome)
+def outcome_name(outcome: int) -> str:
+    """lmp_node's name of an ExecuteCommand outcome (imported when first needed: it loads rclpy)."""
+    from cap_lmp_ros.lmp_node import outcome_name as name_of
+
+    return name_of(outcome)
+
+
+def _outcome_reason(outcome: int) -> str:
+    name = outcome_name(outcome)
     return _OUTCOME_REASONS.get(name, f'the command ended with outcome {name}')
 
 

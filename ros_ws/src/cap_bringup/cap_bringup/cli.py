@@ -34,7 +34,9 @@ import threading
 import time
 from typing import Any, Callable, Sequence
 
+from cap_bringup.namespaces import normalise_namespace
 from cap_lmp.safe_text import one_line, terminal_text
+from cap_tabletop.cameras import CAMERA_NAMES
 
 # Exit codes (README, "Commanding the robot yourself"). A command ended by SIGINT (Ctrl-C) or SIGTERM exits
 # 128 + the signal's number, 130 or 143, as shells report it; `cap up` exits 0 there, that is how it is stopped.
@@ -101,7 +103,7 @@ class _Session:
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         # The graph's names are relative: a node in the graph's namespace finds them under it.
-        self.node = rclpy.create_node(name, context=self.context, namespace=_namespace(namespace))
+        self.node = rclpy.create_node(name, context=self.context, namespace=normalise_namespace(namespace))
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
@@ -120,12 +122,6 @@ class _Session:
         self.executor.shutdown(timeout_sec=0)
         self.node.destroy_node()
         self.context.try_shutdown()
-
-
-def _namespace(namespace: str) -> str:
-    """'' or '/robot1' (what --namespace names; a leading slash is optional)."""
-    namespace = namespace.strip().strip('/')
-    return '/' + namespace if namespace else ''
 
 
 def _say(text: str, out=None) -> None:
@@ -294,7 +290,7 @@ def snapshot(cameras: Sequence[str], out_dir: pathlib.Path, server_timeout: floa
 
 
 def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, cassette: str,
-       record: bool, namespace: str = '', domain: str = 'tabletop') -> int:
+       record: bool, namespace: str = '', domain: str = 'tabletop', cpu: int = 0) -> int:
     """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM.
 
     Exits 0 when stopped by a signal, FATAL_EXIT_CODE (70) when a thread the graph depends on died (the graph no
@@ -317,7 +313,8 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
         try:
             graph = Graph(context, GraphOptions(seed=seed, objects=objects, real_time=real_time,
                                                 perception=perception, llm_backend=backend, cassette=cassette,
-                                                record_cassette=record, namespace=namespace, domain=domain))
+                                                record_cassette=record, namespace=namespace, domain=domain,
+                                                cpu=cpu))
         except (ValueError, CapLLMError) as error:  # a configuration the user can fix: say what, in one line
             _error(f'error: {one_line(str(error))}')
             return EXIT_UNREACHABLE
@@ -385,6 +382,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help='cassette (offline replay) or http (CAP_LLM_BASE_URL, CAP_LLM_MODEL, CAP_LLM_API_KEY)')
     p_up.add_argument('--cassette', default='', help='cassette file (default: the packaged reference cassette)')
     p_up.add_argument('--record', action='store_true', help='with --backend http: record answers into --cassette')
+    p_up.add_argument('--cpu', type=int, default=0, help='pin the graph to this one of the allowed CPUs [0]; give '
+                      'a second graph beside it another')
     p_up.add_argument('--domain', default='tabletop', help='the domain whose prompts, robot API and scene run '
                       '[tabletop]')
     commands.add_parser('demo', help='run the table-top demo (options: cap demo --help)', add_help=False)
@@ -416,15 +415,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv[:1] == ['bench']:
         return bench(argv[1:])
     args = build_parser().parse_args(argv)
+    try:
+        normalise_namespace(getattr(args, 'namespace', ''))
+    except ValueError as error:
+        _error(f'cap: error: {error}')
+        return EXIT_UNREACHABLE
     _signals()  # from here on SIGINT / SIGTERM end the command cleanly (rclpy's imports take a while)
     if args.command == 'up':
         return up(args.seed, args.objects, args.real_time, args.perception, args.backend, args.cassette, args.record,
-                  args.namespace, args.domain)
+                  args.namespace, args.domain, args.cpu)
     if args.command == 'send':
         return send(args.text, args.wait, args.timeout, namespace=args.namespace)
     if args.command == 'stop':
         return stop(args.wait, args.namespace)
-    return snapshot(args.camera or ['front', 'top'], args.out, args.wait, args.namespace)
+    return snapshot(args.camera or list(CAMERA_NAMES), args.out, args.wait, args.namespace)
 
 
 if __name__ == '__main__':

@@ -25,6 +25,7 @@ from typing import Callable
 import numpy as np
 
 from cap_lmp.safe_text import terminal_text
+from cap_tabletop.workspace import CORNERS
 
 DEMO_CASSETTE = pathlib.Path(__file__).resolve().parent / 'cassettes' / 'tabletop_demo.yaml'
 
@@ -34,7 +35,7 @@ SCENE = {
     'yellow block': (-0.05, -0.45), 'red bowl': (-0.15, -0.33), 'blue bowl': (0.0, -0.31),
     'green bowl': (0.18, -0.35),
 }
-BOTTOM_LEFT, TOP_RIGHT = (-0.25, -0.75), (0.25, -0.25)
+BOTTOM_LEFT, TOP_RIGHT = CORNERS['bottom left corner'], CORNERS['top right corner']
 
 State = dict  # object name -> np.ndarray([x, y, z])
 Check = Callable[[State, State, list], str]  # (before, after, said) -> problem ('' when fine)
@@ -172,11 +173,8 @@ def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '
     from cap_interfaces.msg import GraphNames, ObjectSpec
     from cap_interfaces.srv import ResetScene
 
-    result_type = ExecuteCommand.Result
-    outcome_names = {result_type.OUTCOME_DONE: 'done', result_type.OUTCOME_ERROR: 'error',
-                     result_type.OUTCOME_CANCELLED: 'cancelled', result_type.OUTCOME_REFUSED: 'refused',
-                     result_type.OUTCOME_MODEL_ERROR: 'model error'}
     from cap_bringup.graph import Graph, GraphOptions
+    from cap_lmp_ros.lmp_node import outcome_name
 
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / 'commands').mkdir(exist_ok=True)
@@ -219,7 +217,7 @@ def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '
             time.sleep(0.2)  # let the last /cap/say message arrive
             after = _state(graph.world)
             _save_png(graph.world, out_dir / 'commands' / f'{index:02d}-after.png')
-            outcome = outcome_names.get(result.outcome, 'error')
+            outcome = outcome_name(result.outcome)
             problems = [] if outcome == step.expect else [f'expected {step.expect}, got {outcome}']
             if step.message_must_name and step.message_must_name not in result.message:
                 problems.append(f'the message does not name {step.message_must_name!r}')

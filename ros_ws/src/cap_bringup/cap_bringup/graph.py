@@ -1,7 +1,8 @@
 """Bring up the whole table-top graph in one process: sim bridge, perception, pick-and-place and lmp_node.
 
-`cap up`, the demo, the integration tests and the benchmark all start the graph through `bring_up`, so they run
-the same nodes with the same parameters (each package's config/*.yaml, then the overrides given here). Nodes are
+`cap up`, the demo, the integration tests and the benchmark all start the graph as a `Graph`, so they run the same
+nodes with the same parameters (each node's defaults from its config dataclass, then its package's config/*.yaml,
+then the options given here: what GraphOptions sets wins over the YAML files). Nodes are
 composed in one process; the simulator steps in its own thread. Two executors spin them, each in a thread:
 - a multi-threaded executor for the nodes whose callbacks block (action goals that last a whole motion or program);
 - an events executor (callbacks dispatched from C++, without a Python wait set rebuilt at every wake-up) for the
@@ -30,6 +31,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
 
 from cap_bringup.cpu_affinity import pin_to_one_cpu
+from cap_bringup.namespaces import normalise_namespace
 from cap_control.pick_place_node import PickPlaceNode
 from cap_interfaces.msg import GraphNames
 from cap_lmp_ros.domains.registry import get_domain
@@ -61,18 +63,6 @@ def namespace_arguments(namespace: str) -> dict[str, Any]:
         return {}
     return {'namespace': namespace,
             'cli_args': ['--ros-args', '-r', f'{GraphNames.CLOCK_TOPIC}:={namespace}{GraphNames.CLOCK_TOPIC}']}
-
-
-def normalise_namespace(namespace: str) -> str:
-    """'' (none) or '/name': a leading slash added, a trailing one removed; a bad name is a one-line ValueError."""
-    namespace = namespace.strip().strip('/')
-    if not namespace:
-        return ''
-    for part in namespace.split('/'):
-        if not part or not (part[0].isalpha() or part[0] == '_') or not all(c.isalnum() or c == '_' for c in part):
-            raise ValueError(f'namespace {namespace!r}: each part must start with a letter or _ and hold only '
-                             'letters, digits and _')
-    return '/' + namespace
 
 
 def is_quick(node_name: str, parameters: dict[str, Any]) -> bool:
@@ -121,15 +111,39 @@ class GraphOptions:
 
 
 def config_parameters(package: str, filename: str) -> dict[str, dict[str, Any]]:
-    """{node name: {parameter: value}} from a package's installed config file (empty if there is none)."""
+    """{node name: {parameter: value}} from a package's installed config file (empty if there is none).
+
+    Node keys may be written `pick_place`, `/pick_place` or `/**/pick_place` (the last matches the node under any
+    namespace, as the launch file needs); `/**` applies to every node. Nested maps become dotted parameter names
+    (`workspace: {y_min: -0.8}` is `workspace.y_min`), as ROS reads them from a parameter file.
+    """
     try:
         path = pathlib.Path(get_package_share_directory(package)) / 'config' / filename
     except PackageNotFoundError:
         return {}
     if not path.exists():
         return {}
-    document = yaml.safe_load(path.read_text(encoding='utf-8')) or {}
-    return {node: dict((body or {}).get('ros__parameters') or {}) for node, body in document.items()}
+    return parameters_of(yaml.safe_load(path.read_text(encoding='utf-8')) or {})
+
+
+def parameters_of(document: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """{node name: {dotted parameter name: value}} of a parameter file's document (see config_parameters)."""
+    nodes: dict[str, dict[str, Any]] = {}
+    for key, body in document.items():
+        node = '/**' if key == '/**' else str(key).removeprefix('/**/').lstrip('/')
+        nodes.setdefault(node, {}).update(flat_parameters((body or {}).get('ros__parameters') or {}))
+    return nodes
+
+
+def flat_parameters(values: dict[str, Any], prefix: str = '') -> dict[str, Any]:
+    """Nested parameter maps as dotted names: {'workspace': {'y_min': -0.8}} -> {'workspace.y_min': -0.8}."""
+    flat: dict[str, Any] = {}
+    for name, value in values.items():
+        if isinstance(value, dict):
+            flat.update(flat_parameters(value, f'{prefix}{name}.'))
+        else:
+            flat[f'{prefix}{name}'] = value
+    return flat
 
 
 class Spinner:

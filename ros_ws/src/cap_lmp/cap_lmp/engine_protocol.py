@@ -1,5 +1,5 @@
 """What a front end needs of an engine: Engine (in this process) and IsolatedEngine (in a sandbox process) both
-provide it, so the ROS node, the CLI and the benchmarks can take either."""
+provide it, so the ROS node (lmp_node) can take either."""
 from __future__ import annotations
 
 from typing import Callable, Protocol, runtime_checkable

@@ -66,7 +66,16 @@ RESULT_OUTCOMES = {Outcome.DONE: ExecuteCommand.Result.OUTCOME_DONE, Outcome.ERR
                    Outcome.MODEL_ERROR: ExecuteCommand.Result.OUTCOME_MODEL_ERROR}
 _FINAL_STAGES = {Outcome.DONE: StatusEvent.STAGE_DONE, Outcome.REFUSED: StatusEvent.STAGE_REFUSED,
                  Outcome.CANCELLED: StatusEvent.STAGE_CANCELLED}  # errors of every kind: STAGE_ERROR
-__all__ = ['COMMAND_QOS', 'EVENT_QOS', 'RESULT_OUTCOMES', 'RUNTIME_PARAMETERS', 'LmpNode', 'main']
+__all__ = ['COMMAND_QOS', 'EVENT_QOS', 'RESULT_OUTCOMES', 'RUNTIME_PARAMETERS', 'LmpNode', 'main', 'outcome_name']
+
+
+def outcome_name(value: int) -> str:
+    """The name of an ExecuteCommand result's `outcome` ('done', 'error', 'cancelled', 'refused', 'model_error'),
+    or 'unknown' for OUTCOME_UNKNOWN (a result nobody filled in) and any other value."""
+    for outcome, number in RESULT_OUTCOMES.items():
+        if number == value:
+            return outcome.value
+    return 'unknown'
 
 
 class LmpNode(Node):

@@ -8,16 +8,17 @@ import yaml
 from cap_lmp.cassette import HAND_WRITTEN, Cassette, CassetteClient, CassetteEntry, cassette_key, make_client
 from cap_lmp.errors import CassetteMissError
 from cap_lmp.llm import CompletionRequest, OpenAICompatibleClient
-from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine, tabletop_lmp_configs
+from cap_lmp_ros.domains.tabletop.lmps import build_engine, tabletop_lmp_configs
 from cap_lmp.testing.openai_server import ScriptedOpenAIServer
 from cap_lmp_ros.testing.table import Table
+from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT
 
 SCENE = {'red block': (-0.1, -0.4), 'blue block': (0.1, -0.45), 'red bowl': (-0.15, -0.65), 'blue bowl': (0.15, -0.3)}
 CONTEXT = "objects = ['red block', 'blue block', 'red bowl', 'blue bowl']"
 
 
 def write_cassette(path, entries) -> None:
-    path.write_text(yaml.safe_dump({'format': 'cap-llm-cassette/1', 'entries': entries}, sort_keys=False))
+    path.write_text(yaml.safe_dump({'format': CASSETTE_FORMAT, 'entries': entries}, sort_keys=False))
 
 
 def test_replay_runs_a_command_offline(tmp_path):
@@ -31,7 +32,7 @@ def test_replay_runs_a_command_offline(tmp_path):
          'completion': "ret_val = [name for name in objects if 'block' in name]"},
     ])
     table = Table.with_objects(SCENE)
-    engine = build_tabletop_engine(table.api(), CassetteClient(path))
+    engine = build_engine(table.api(), CassetteClient(path))
     result = engine.run('put the  blocks in the bowls with matching colors.')
     assert result.success, result.message
     assert np.allclose(table.get_obj_pos('red block'), SCENE['red bowl'])
@@ -45,7 +46,7 @@ def test_a_missing_entry_names_the_lmp_and_the_query(tmp_path):
     assert "LMP 'parse_position'" in str(caught.value) and "query 'top left corner'" in str(caught.value)
 
     table = Table.with_objects(SCENE)
-    result = build_tabletop_engine(table.api(), client).run('stack all the blocks')
+    result = build_engine(table.api(), client).run('stack all the blocks')
     assert not result.success and result.error_type == 'CassetteMissError'
     assert "'tabletop_ui'" in result.message and "'stack all the blocks'" in result.message
 
@@ -56,7 +57,7 @@ def test_record_mode_wraps_a_real_backend_and_writes_provenance(tmp_path):
                               model='model-x') as server:
         backend = OpenAICompatibleClient(server.base_url, 'model-x', backoff_s=0.01)
         table = Table.with_objects(SCENE)
-        engine = build_tabletop_engine(table.api(), CassetteClient(path, mode='record', backend=backend))
+        engine = build_engine(table.api(), CassetteClient(path, mode='record', backend=backend))
         assert engine.run('put the red block in the blue bowl').success
         assert len(server.requests) == 1
     saved = yaml.safe_load(path.read_text())
@@ -65,7 +66,7 @@ def test_record_mode_wraps_a_real_backend_and_writes_provenance(tmp_path):
                                  'completion': "put_first_on_second('red block', 'blue bowl')"}]
     # the server is gone: replay answers from the file
     table = Table.with_objects(SCENE)
-    replayed = build_tabletop_engine(table.api(), CassetteClient(path)).run('put the red block in the blue bowl')
+    replayed = build_engine(table.api(), CassetteClient(path)).run('put the red block in the blue bowl')
     assert replayed.success and np.allclose(table.get_obj_pos('red block'), SCENE['blue bowl'])
 
 

@@ -13,10 +13,11 @@ from std_msgs.msg import String
 
 from cap_interfaces.action import ExecuteCommand
 from cap_interfaces.msg import StatusEvent
-from cap_lmp_ros.domains.registry import domain_names, get_domain, register_domain
+from cap_lmp_ros.domains.registry import domain_names, get_domain, register_domain, unregister_domain
 from cap_lmp_ros.lmp_node import LmpNode
 from cap_lmp_ros.testing.lmp_graph import LmpGraph, wait_for
 from cap_lmp_ros.testing.toy_domain import BELL_TOPIC, toy_domain
+from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT
 
 TOY_PROGRAMS = {'ring the bell twice': 'ring_bell(2)', 'open a file': "import os\nos.listdir('/')",
                 'ring the bell a hundred times': 'ring_bell(100)'}
@@ -55,8 +56,11 @@ def test_a_domain_builder_must_be_found_by_name_in_the_sandbox_process(tmp_path)
 
 def test_a_second_domain_of_the_same_name_is_refused(tmp_path):
     register_domain(toy_domain(tmp_path / 'a.yaml', name='toy_twice'))
-    with pytest.raises(ValueError, match='registered already'):
-        register_domain(toy_domain(tmp_path / 'b.yaml', name='toy_twice'))
+    try:
+        with pytest.raises(ValueError, match='registered already'):
+            register_domain(toy_domain(tmp_path / 'b.yaml', name='toy_twice'))
+    finally:
+        unregister_domain('toy_twice')
 
 
 @pytest.fixture
@@ -64,7 +68,7 @@ def toy_graph(ros_context, tmp_path):
     cassette = tmp_path / 'toy.yaml'
     entries = [{'lmp': 'toy_ui', 'query': query, 'context': '*', 'completion': code, 'source': 'written by hand'}
                for query, code in TOY_PROGRAMS.items()]
-    cassette.write_text(yaml.safe_dump({'format': 'cap-llm-cassette/1', 'entries': entries}))
+    cassette.write_text(yaml.safe_dump({'format': CASSETTE_FORMAT, 'entries': entries}))
     register_domain(toy_domain(cassette), replace=True)  # its cassette is the default: no parameter names it
     graph = LmpGraph(ros_context, tmp_path, [Parameter('domain', value='toy'), Parameter('time_limit_s', value=30.0)])
     bells: list[str] = []
@@ -73,6 +77,7 @@ def toy_graph(ros_context, tmp_path):
     assert wait_for(lambda: graph.user.count_publishers(BELL_TOPIC) == 1)
     yield graph
     graph.close()
+    unregister_domain('toy')
 
 
 def test_a_registered_toy_domain_runs_through_lmp_node(toy_graph):

@@ -9,7 +9,7 @@ import pytest
 from cap_lmp.engine import CODE, DONE, ERROR, EXECUTING, GENERATING, Engine, LMPConfig
 from cap_lmp.llm import OpenAICompatibleClient
 from cap_lmp.sandbox import SandboxLimits
-from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
+from cap_lmp_ros.domains.tabletop.lmps import build_engine
 from cap_lmp.testing.openai_server import ScriptedOpenAIServer, ScriptedReply
 from cap_lmp_ros.testing.table import Table
 
@@ -32,7 +32,7 @@ def make_engine(server: ScriptedOpenAIServer, table: Table, api: str = 'chat', *
     client = OpenAICompatibleClient(server.base_url, model='scripted-model', api=api, backoff_s=0.01,
                                     timeout_s=5.0)
     options.setdefault('limits', SandboxLimits(time_limit_s=1.0))
-    return build_tabletop_engine(table.api(), client, **options)
+    return build_engine(table.api(), client, **options)
 
 
 def fgen_requests(server: ScriptedOpenAIServer) -> list[str]:

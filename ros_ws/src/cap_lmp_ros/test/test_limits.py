@@ -109,8 +109,8 @@ def test_a_slow_model_in_a_loop_meets_the_model_deadline(server, table):
 
 def test_the_model_deadline_holds_in_process_too(server, table):
     """sandbox_process:=false: the engine gives each request the budget left, and stops the loop itself."""
-    from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
-    engine = build_tabletop_engine(table.api(), OpenAICompatibleClient(server.base_url, 'scripted-model',
+    from cap_lmp_ros.domains.tabletop.lmps import build_engine
+    engine = build_engine(table.api(), OpenAICompatibleClient(server.base_url, 'scripted-model',
                                                                        max_retries=0),
                                    SandboxLimits(time_limit_s=TIME_LIMIT_S), model_time_limit_s=2.0)
     server.push(ScriptedReply(), *[ScriptedReply(delay_s=0.4) for _ in range(20)])
@@ -256,12 +256,12 @@ EXCEPTIONS = {
 
 @pytest.mark.parametrize('isolated', [False, True], ids=['Engine', 'IsolatedEngine'])
 def test_an_enormous_exception_is_reported_bounded(table, isolated):
-    from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
+    from cap_lmp_ros.domains.tabletop.lmps import build_engine
     with ScriptedOpenAIServer({**EXCEPTIONS, MOVE: PROGRAMS[MOVE]}) as server:
         client = OpenAICompatibleClient(server.base_url, 'scripted-model', max_retries=0)
         limits = SandboxLimits(time_limit_s=TIME_LIMIT_S)
         engine = (IsolatedEngine(build_engine, table.api(), client, limits) if isolated
-                  else build_tabletop_engine(table.api(), client, limits))
+                  else build_engine(table.api(), client, limits))
         try:
             for command in EXCEPTIONS:
                 started = time.monotonic()

@@ -11,6 +11,7 @@ from std_srvs.srv import Trigger
 from cap_interfaces.action import ExecuteCommand
 from cap_interfaces.msg import StatusEvent
 from cap_lmp_ros.testing.lmp_graph import TWO_BLOCKS, LmpGraph, wait_for
+from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT
 
 PROGRAMS = {
     'which blocks are there': "say('I see ' + ', '.join(n for n in get_obj_names() if n.endswith('block')))",
@@ -29,7 +30,7 @@ PROGRAMS = {
 def _write_cassette(path):
     entries = [{'lmp': 'tabletop_ui', 'query': query, 'context': '*', 'completion': code,
                 'source': 'written by hand as a reference program'} for query, code in PROGRAMS.items()]
-    path.write_text(yaml.safe_dump({'format': 'cap-llm-cassette/1', 'entries': entries}))
+    path.write_text(yaml.safe_dump({'format': CASSETTE_FORMAT, 'entries': entries}))
 
 
 STUB_OBJECTS = TWO_BLOCKS + ('  - {color: green, category: bowl, position: [0.0, -0.4, 0.03], '

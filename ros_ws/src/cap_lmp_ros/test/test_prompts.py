@@ -10,7 +10,7 @@ from cap_lmp.functions import undefined_calls
 from cap_lmp.prompts import load_prompt, prompt_names
 from cap_lmp_ros.domains.tabletop.lmps import PROMPTS_DIR
 from cap_lmp.sandbox import check_code
-from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine, tabletop_lmp_configs
+from cap_lmp_ros.domains.tabletop.lmps import build_engine, tabletop_lmp_configs
 from cap_lmp_ros.testing.table import Table
 
 LMP_PROMPTS = ['tabletop_ui', 'parse_obj_name', 'parse_position', 'parse_question', 'transform_shape_pts', 'fgen']
@@ -97,7 +97,7 @@ def test_tabletop_ui_has_thirty_examples_with_their_scene():
 def test_examples_call_only_the_api_the_lmps_and_functions_fgen_knows():
     """Every bare name the examples call exists for generated code, or is defined by an fgen example (so a model
     following the examples meets the same names at run time)."""
-    engine = build_tabletop_engine(Table().api(), client=None)  # no model needed to inspect the scope
+    engine = build_engine(Table().api(), client=None)  # no model needed to inspect the scope
     known = set(engine.scope) | set(engine.scope['__builtins__'])
     fgen_defined = {name for _query, code in examples(load_prompt(PROMPTS_DIR, 'fgen'))
                     for name in [node.name for node in ast.parse(code).body if isinstance(node, ast.FunctionDef)]}

@@ -172,9 +172,9 @@ class _ScriptedClient:
 
 def test_engine_bounds_the_message_of_a_programs_exception():
     """The engine formats the program's exception after the watchdog has ended: the text must be bounded."""
-    from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
+    from cap_lmp_ros.domains.tabletop.lmps import build_engine
     from cap_lmp_ros.testing.table import Table
-    engine = build_tabletop_engine(Table.with_objects({'red block': (0, -0.5)}).api(),
+    engine = build_engine(Table.with_objects({'red block': (0, -0.5)}).api(),
                                    _ScriptedClient(['row = [0] * 10 ** 6\nraise ValueError([row] * 20)']),
                                    limits=LIMITS)
     result = engine.run('fail loudly')
@@ -185,7 +185,7 @@ _SESSION_CHILD = r'''
 import json
 from cap_lmp.llm import Completion
 from cap_lmp.sandbox import SandboxLimits
-from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
+from cap_lmp_ros.domains.tabletop.lmps import build_engine
 from cap_lmp_ros.testing.table import Table
 
 class Client:
@@ -196,7 +196,7 @@ class Client:
         return Completion(text=self.answers.pop(0))
 
 keep = 'keep_{0} = [np.ones(2 * 10 ** 6) + i for i in range(6)]'
-engine = build_tabletop_engine(Table.with_objects({'red block': (0, -0.5)}).api(),
+engine = build_engine(Table.with_objects({'red block': (0, -0.5)}).api(),
                                Client([keep.format(i) for i in range(4)]),
                                limits=SandboxLimits(time_limit_s=5.0, max_memory_growth_bytes=256 << 20))
 results = [engine.run(f'keep {i}') for i in range(4)]
@@ -288,10 +288,10 @@ r = [0] * np.int64(3)
 
 
 def test_a_shadowed_api_name_is_restored_for_the_next_command():
-    from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine
+    from cap_lmp_ros.domains.tabletop.lmps import build_engine
     from cap_lmp_ros.testing.table import Table
     table = Table.with_objects({'red block': (0, -0.5)})
-    engine = build_tabletop_engine(table.api(), _ScriptedClient([
+    engine = build_engine(table.api(), _ScriptedClient([
         'say = lambda text: None\nnp = None', "say('still here')\nx = np.zeros(2)"]), limits=LIMITS)
     first, second = engine.run('shadow'), engine.run('speak')
     assert first.success and second.success, (first.message, second.message)

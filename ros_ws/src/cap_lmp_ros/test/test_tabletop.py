@@ -8,7 +8,7 @@ import pytest
 
 import cap_lmp_ros.domains.tabletop as tabletop_domain
 from cap_lmp.cassette import Cassette, CassetteClient
-from cap_lmp_ros.domains.tabletop.lmps import build_tabletop_engine, denormalize_xy, get_corner_name, get_side_name
+from cap_lmp_ros.domains.tabletop.lmps import build_engine, denormalize_xy, get_corner_name, get_side_name
 from cap_lmp_ros.testing.table import Table
 
 REFERENCE = Path(tabletop_domain.__file__).parent / 'cassettes' / 'tabletop_reference.yaml'
@@ -44,7 +44,7 @@ SCENE = {'blue block': (-0.15, -0.35), 'red block': (0.0, -0.4), 'green block': 
 ])
 def test_reference_programs_replay_offline(command, expected):
     table = Table.with_objects(SCENE)
-    result = build_tabletop_engine(table.api(), CassetteClient(REFERENCE)).run(command)
+    result = build_engine(table.api(), CassetteClient(REFERENCE)).run(command)
     assert result.success, result.message
     for block, bowl in expected.items():
         assert np.allclose(table.get_obj_pos(block), table.get_obj_pos(bowl)), block
@@ -52,7 +52,7 @@ def test_reference_programs_replay_offline(command, expected):
 
 def test_stacking_reference_program_builds_one_stack():
     table = Table.with_objects(SCENE)
-    result = build_tabletop_engine(table.api(), CassetteClient(REFERENCE)).run('stack all the blocks')
+    result = build_engine(table.api(), CassetteClient(REFERENCE)).run('stack all the blocks')
     assert result.success, result.message
     blocks = [table.objects[name] for name in ('blue block', 'red block', 'green block')]
     assert all(np.allclose(block.xy, blocks[0].xy) for block in blocks)

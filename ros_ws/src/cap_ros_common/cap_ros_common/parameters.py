@@ -4,14 +4,12 @@ A node declares its parameters with `declare_config(node, MyConfig)`; the YAML f
 overrides. A field's description comes from `parameter(default, description)`; a nested dataclass field becomes
 dotted names (`workspace.x_min`), which YAML writes as nested maps. Tuples are declared as ROS arrays and come
 back as tuples. Fields whose type ROS parameters cannot carry (None defaults) are passed in `skip` and set by the
-node itself.
+node itself. Only `declare_config` needs ROS (rcl_interfaces); `parameter()` and `parameter_names()` do not.
 """
 from __future__ import annotations
 
 import dataclasses
 from typing import Any, Iterable, TypeVar
-
-from rcl_interfaces.msg import ParameterDescriptor
 
 Config = TypeVar('Config')
 
@@ -35,6 +33,9 @@ def _default(field: dataclasses.Field) -> Any:
 def declare_config(node: Any, config_type: type[Config], *, prefix: str = '',
                    skip: Iterable[str] = ()) -> Config:
     """Declare one parameter per field of `config_type` on `node`; return the config with the values in force."""
+    # Imported here: the config dataclasses that use `parameter()` live in plain modules that must not load ROS.
+    from rcl_interfaces.msg import ParameterDescriptor
+
     skipped = set(skip)
     values: dict[str, Any] = {}
     for field in dataclasses.fields(config_type):

@@ -15,6 +15,7 @@ then ``TabletopWorld('toy', seed, objects)`` or the bridge node's ``scene`` para
 from __future__ import annotations
 
 import dataclasses
+import importlib.metadata
 import pathlib
 import threading
 from typing import Callable, Sequence
@@ -86,8 +87,27 @@ def unregister_scene(name: str) -> None:
         _registry.pop(name, None)
 
 
+# Other packages offer scenes as entry points of this group (name = the scene's name, value = a SceneSpec), so
+# that a scene of theirs can be chosen by the bridge's `scene` parameter in any process.
+ENTRY_POINT_GROUP = 'cap_ros.scenes'
+_entry_points_loaded = False
+
+
+def _load_entry_points() -> None:
+    global _entry_points_loaded
+    if _entry_points_loaded:
+        return
+    _entry_points_loaded = True
+    for entry in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        spec = entry.load()
+        if isinstance(spec, SceneSpec):
+            with _lock:
+                _registry.setdefault(spec.name, spec)
+
+
 def get_scene(name: str) -> SceneSpec:
     """The registered scene called `name`; ValueError naming the known scenes otherwise."""
+    _load_entry_points()
     with _lock:
         spec = _registry.get(name)
         if spec is None:
@@ -96,6 +116,8 @@ def get_scene(name: str) -> SceneSpec:
 
 
 def scene_names() -> list[str]:
+    """The names of every registered scene (built in, registered in this process, or offered by entry points)."""
+    _load_entry_points()
     with _lock:
         return sorted(_registry)
 

@@ -12,6 +12,7 @@ import math
 from typing import Sequence
 
 import numpy as np
+from cap_ros_common.time import to_seconds
 
 # FollowJointTrajectory result codes (cap_interfaces mirrors control_msgs).
 SUCCESSFUL = 0
@@ -94,7 +95,7 @@ def plan_from_goal(goal, arm_joint_names: Sequence[str], hold_positions: np.ndar
     if not points:
         raise GoalError(INVALID_GOAL, 'the trajectory has no points')
     columns = [arm_joint_names.index(n) for n in names]
-    times = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in points])
+    times = np.array([to_seconds(p.time_from_start) for p in points])
     if times[0] < 0 or np.any(np.diff(times) <= 0):
         raise GoalError(INVALID_GOAL, 'time_from_start must be >= 0 and increase strictly from point to point')
     positions = np.tile(np.asarray(hold_positions, dtype=float), (len(points), 1))
@@ -111,7 +112,7 @@ def plan_from_goal(goal, arm_joint_names: Sequence[str], hold_positions: np.ndar
                 raise GoalError(INVALID_GOAL, f'point {i} has {len(point.velocities)} velocities for {len(names)} '
                                 'joints')
             velocities[i, columns] = point.velocities
-    goal_time = goal.goal_time_tolerance.sec + goal.goal_time_tolerance.nanosec * 1e-9
+    goal_time = to_seconds(goal.goal_time_tolerance)
     return TrajectoryPlan(
         times=times, positions=positions, velocities=velocities,
         goal_position_tolerance=_tolerances(goal.goal_tolerance, arm_joint_names, 'position',

@@ -11,7 +11,6 @@ import numpy as np
 TABLE_X_RANGE: tuple[float, float] = (-0.3, 0.3)
 TABLE_Y_RANGE: tuple[float, float] = (-0.8, -0.2)
 TABLE_Z = 0.0  # height of the table-top surface in the world frame [m]
-TABLE_CENTER: tuple[float, float] = (0.0, -0.5)
 
 NORMALISED_ORIGIN = np.array([-0.25, -0.75])
 NORMALISED_SPAN = np.array([0.5, 0.5])

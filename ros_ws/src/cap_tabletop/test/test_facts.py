@@ -11,7 +11,7 @@ def test_named_positions_lie_on_the_table_and_match_normalised_coordinates():
         assert workspace.on_table(x, y), name
     assert np.allclose(workspace.NORMALISED_ORIGIN, workspace.CORNERS['bottom left corner'])
     assert np.allclose(workspace.NORMALISED_ORIGIN + workspace.NORMALISED_SPAN, workspace.CORNERS['top right corner'])
-    assert workspace.MIDDLE == workspace.TABLE_CENTER
+    assert workspace.MIDDLE == (0.0, -0.5)  # the table's centre
     assert not workspace.on_table(0.0, -0.21, margin=0.03)
 
 

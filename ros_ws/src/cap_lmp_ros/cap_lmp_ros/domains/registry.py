@@ -1,12 +1,15 @@
 """The robot domains lmp_node can run, each as one unit: its engine, its robot API over ROS, its scene, its cassette.
 
 A built-in domain is a sub-package of cap_lmp_ros.domains with a `domain.py` that defines `DOMAIN` (a Domain):
-adding a domain is adding a folder. Others are added with `register_domain`. No rclpy here, nor in what a Domain
-names for the sandbox process (`build_engine` and its module); only `robot_api`, called in the node, may reach it.
+adding a domain is adding a folder. Another package offers one as an entry point of the group `cap_ros.domains`
+(value: a Domain), found in every process; `register_domain` adds one in this process (tests). No rclpy here,
+nor in what a Domain names for the sandbox process (`build_engine` and its module); only `robot_api`, called in
+the node, may reach it.
 """
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
 import importlib.util
 import pkgutil
 import threading
@@ -33,6 +36,9 @@ class RobotBinding(Protocol):
         """Stop waiting for the robot and cancel the motion in progress (thread-safe)."""
         ...
 
+    # Optional: `bind_clients(node)` moves the binding's service and action clients onto another node; the
+    # one-process graph calls it, when the binding has it, to keep those clients on its fast executor.
+
 
 # build_engine(api: Mapping[str, Callable], client: LLMClient, limits: SandboxLimits | None, **options) -> Engine:
 # a module-level function, so the sandbox process can import it.
@@ -57,8 +63,10 @@ class Domain:
         builder_reference(self.build_engine)  # a one-line ValueError now, not when the sandbox process starts
 
 
+# Other packages offer domains as entry points of this group (value: a Domain), found in every process.
+ENTRY_POINT_GROUP = 'cap_ros.domains'
 _domains: dict[str, Domain] = {}
-_lock = threading.Lock()
+_lock = threading.RLock()  # reentrant: a domain.py may register more domains while being discovered
 _discovered = False
 
 
@@ -77,6 +85,11 @@ def _discover() -> None:
             if importlib.util.find_spec(name) is None:
                 continue
             domain = getattr(importlib.import_module(name), 'DOMAIN', None)
+            if isinstance(domain, Domain):
+                _domains.setdefault(domain.name, domain)
+        # Domains of other packages: entry points of this group whose value is a Domain.
+        for entry in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+            domain = entry.load()
             if isinstance(domain, Domain):
                 _domains.setdefault(domain.name, domain)
 
@@ -116,8 +129,6 @@ def engine_api(domain: Domain, functions: Mapping[str, Callable[..., Any]]) -> d
     return {name: functions[name] for name in domain.robot_functions}
 
 
-__all__ = ['Domain', 'EngineBuilder', 'RobotApiFactory', 'RobotBinding', 'domain_names', 'engine_api', 'get_domain',
-           'register_domain']
 
 
 def unregister_domain(name: str) -> None:
@@ -125,3 +136,7 @@ def unregister_domain(name: str) -> None:
     _discover()
     with _lock:
         _domains.pop(name, None)
+
+
+__all__ = ['Domain', 'ENTRY_POINT_GROUP', 'EngineBuilder', 'RobotApiFactory', 'RobotBinding', 'domain_names',
+           'engine_api', 'get_domain', 'register_domain', 'unregister_domain']

@@ -12,9 +12,10 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from cap_lmp_ros.domains.tabletop.lmps import denormalize_xy, get_corner_name, get_side_name
+from cap_tabletop.objects import BLOCK_SIZE, BOWL_RIM_RADIUS
+from cap_tabletop.workspace import on_table
 
-BLOCK_SIZE = 0.04
-BOWL_SIZE = 0.12
+BOWL_SIZE = 2 * BOWL_RIM_RADIUS  # across the rim
 
 
 class UnknownObjectError(ValueError):
@@ -82,7 +83,7 @@ class Table:
             xy = np.asarray(target, dtype=float).reshape(-1)[:2]
             if xy.shape != (2,) or not np.all(np.isfinite(xy)):
                 raise ValueError(f'cannot place the {obj_name} at {target!r}: expected a position [x, y]')
-            if not (-0.3 <= xy[0] <= 0.3 and -0.8 <= xy[1] <= -0.2):
+            if not on_table(xy[0], xy[1]):
                 raise ValueError(f'cannot place the {obj_name} at ({xy[0]:.2f}, {xy[1]:.2f}): outside the table')
             height = 0.0
         obj.xy, obj.height = xy, height

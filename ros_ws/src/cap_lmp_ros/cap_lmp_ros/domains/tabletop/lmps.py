@@ -22,8 +22,6 @@ from cap_tabletop.workspace import CORNERS, MIDDLE, NORMALISED_ORIGIN, NORMALISE
 PROMPTS_DIR = Path(__file__).resolve().parent / 'prompts'
 
 # Names generated code may call, besides np, Shapely and the LMPs.
-TABLETOP_API = ('get_obj_names', 'get_obj_pos', 'get_bbox', 'get_color', 'is_obj_visible', 'denormalize_xy',
-                'get_corner_name', 'get_side_name', 'put_first_on_second', 'say')
 
 
 def denormalize_xy(pos: Sequence[float]) -> np.ndarray:
@@ -73,8 +71,7 @@ def build_engine(api: Mapping[str, Callable[..., Any]], client: LLMClient, limit
     return Engine(tabletop_lmp_configs(), client, names, limits=limits, default_lmp='tabletop_ui', **engine_options)
 
 
-build_tabletop_engine = build_engine  # the name callers outside the registry use
 
-__all__ = ['CORNERS', 'MIDDLE', 'NORMALISED_ORIGIN', 'NORMALISED_SPAN', 'PROMPTS_DIR', 'SIDES', 'TABLETOP_API',
-           'build_engine', 'build_tabletop_engine', 'denormalize_xy', 'get_corner_name', 'get_side_name',
+__all__ = ['CORNERS', 'MIDDLE', 'NORMALISED_ORIGIN', 'NORMALISED_SPAN', 'PROMPTS_DIR', 'SIDES',
+           'build_engine', 'denormalize_xy', 'get_corner_name', 'get_side_name',
            'tabletop_lmp_configs']

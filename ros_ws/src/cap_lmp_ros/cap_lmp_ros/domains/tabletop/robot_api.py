@@ -23,7 +23,7 @@ from std_msgs.msg import String
 from cap_interfaces.action import PickPlace
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectNames, GetObjectState
-from cap_lmp.errors import RobotApiError, StoppedError  # noqa: F401  (callers import them from here too)
+from cap_lmp.errors import RobotApiError, StoppedError
 from cap_lmp.safe_text import wire_text
 
 
