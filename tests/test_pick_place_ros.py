@@ -6,24 +6,28 @@ pick_place node, over DDS. Outcomes are judged on the simulator's final state.
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 import pytest
 from action_msgs.msg import GoalStatus
+from action_msgs.srv import CancelGoal
 from geometry_msgs.msg import Point
-from rclpy.action import ActionClient
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Empty
 
-from cap_control.pick_place_node import PickPlaceNode
-from cap_interfaces.action import PickPlace
+from cap_control.pick_place_node import PickPlaceNode, _ActionGoal, _mark_canceling
+from cap_interfaces.action import FollowJointTrajectory, PickPlace
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectState, ResetScene
 from cap_perception.perception_node import PerceptionNode
 from cap_sim_bridge.bridge_node import SimBridgeNode
+from cap_tabletop.workspace import CORNERS as TABLE_CORNERS
 
 WAIT = 60.0  # [s] upper bound of one pick-and-place; the usual one takes a few seconds
 OBJECTS = 'red block, green block, blue bowl, yellow block'
@@ -201,6 +205,86 @@ def test_cancel_or_stop_halts_the_arm_mid_motion(graph, spin_until, how):
     assert feedback[-1].stage == PickPlace.Feedback.STAGE_MOVE
 
 
+@pytest.mark.parametrize('accept', [True, False])
+def test_a_cancel_asked_before_the_arm_accepts_its_goal_reaches_it_once_it_does(ros_context, spin_until, accept):
+    """The node's action goal takes a cancel before the server has answered: it cancels the goal once the server
+    has accepted it (then its future completes), and completes it at once if the server refuses the goal."""
+    group = ReentrantCallbackGroup()
+    server_node = Node('slow_arm', context=ros_context)
+    asked, release, cancel_requests, statuses = threading.Event(), threading.Event(), [], []
+
+    def on_goal(_request) -> GoalResponse:
+        asked.set()
+        assert release.wait(30.0)
+        return GoalResponse.ACCEPT if accept else GoalResponse.REJECT
+
+    def on_cancel(goal_handle) -> CancelResponse:
+        cancel_requests.append(bytes(goal_handle.goal_id.uuid))
+        return CancelResponse.ACCEPT
+
+    def execute(goal_handle):
+        assert _mark_canceling(goal_handle, timeout_s=30.0), 'the cancel came'
+        goal_handle.canceled()
+        statuses.append(goal_handle.status)
+        return FollowJointTrajectory.Result()
+
+    server = ActionServer(server_node, FollowJointTrajectory, 'slow_arm', execute, goal_callback=on_goal,
+                          cancel_callback=on_cancel, callback_group=group)
+    client_node = Node('slow_arm_client', context=ros_context)
+    client = ActionClient(client_node, FollowJointTrajectory, 'slow_arm', callback_group=group)
+    executor = MultiThreadedExecutor(num_threads=4, context=ros_context)
+    for node in (server_node, client_node):
+        executor.add_node(node)
+    try:
+        assert client.wait_for_server(timeout_sec=10.0)
+        goal = _ActionGoal(client, FollowJointTrajectory.Goal(), lambda result: result)
+        assert spin_until(executor, asked.is_set, timeout=10.0)
+        cancelled = goal.cancel()
+        assert not cancelled.done() and not cancel_requests, 'nothing to cancel before the goal has an id'
+        release.set()
+        assert spin_until(executor, cancelled.done, timeout=10.0)
+        assert goal.accepted.result() is accept
+        if accept:
+            assert cancelled.result().return_code == CancelGoal.Response.ERROR_NONE
+            assert len(cancel_requests) == 1
+            assert spin_until(executor, lambda: bool(statuses), timeout=10.0)
+            assert statuses == [GoalStatus.STATUS_CANCELED]
+            assert spin_until(executor, goal.result.done, timeout=10.0)
+        else:
+            assert not cancel_requests, 'a refused goal never moved: nothing to cancel'
+    finally:
+        release.set()
+        executor.shutdown()
+        for node in (client_node, server_node):
+            executor.remove_node(node)
+        client.destroy()
+        server.destroy()
+        for node in (client_node, server_node):
+            node.destroy_node()
+
+
+def test_readiness_is_looked_at_on_wall_time_even_before_the_first_clock_message(ros_context, spin_until):
+    """With use_sim_time and no /clock yet, simulated time stands still; the wait for a server still ends, and its
+    timer goes once the wait ends, whether the server became ready or the waiter stopped waiting."""
+    node = PickPlaceNode(context=ros_context, parameter_overrides=[Parameter('use_sim_time', value=True)])
+    executor = MultiThreadedExecutor(num_threads=2, context=ros_context)
+    executor.add_node(node)
+    timers_before = len(list(node.timers))
+    try:
+        ready = threading.Event()
+        future = node.when_ready(ready.is_set)
+        assert not future.done() and len(list(node.timers)) == timers_before + 1
+        ready.set()
+        assert spin_until(executor, future.done, timeout=10.0)
+        assert spin_until(executor, lambda: len(list(node.timers)) == timers_before, timeout=10.0)
+        abandoned = node.when_ready(lambda: False)
+        abandoned.cancel()  # the executor stopped waiting (interrupted, or its own timeout)
+        assert len(list(node.timers)) == timers_before
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+
+
 STUB_OBJECTS = """objects:
   - {color: purple, category: block, position: [0.0, -0.75, 0.02]}
   - {color: cyan, category: block, position: [0.0, -1.1, 0.02]}
@@ -247,7 +331,7 @@ def test_what_perception_reports_wrongly_fails_with_a_reason(ros_context, spin_u
             node.destroy_node()
 
 
-CORNERS = [(-0.25, -0.25), (0.25, -0.25), (-0.25, -0.75), (0.25, -0.75)]
+CORNERS = list(TABLE_CORNERS.values())
 
 
 @pytest.mark.slow

@@ -38,6 +38,7 @@ from typing import Sequence, Union
 
 import numpy as np
 from cap_ros_common.parameters import parameter
+from cap_tabletop.objects import CATEGORY_BLOCK, CATEGORY_BOWL
 from cap_tabletop.workspace import TABLE_X_RANGE, TABLE_Y_RANGE, TABLE_Z
 
 from cap_control.kinematics import (
@@ -85,10 +86,6 @@ class PickPlaceError(Exception):
         super().__init__(message)
         self.code = code
         self.message = message
-
-
-CATEGORY_BLOCK = 'block'
-CATEGORY_BOWL = 'bowl'
 
 
 @dataclass(frozen=True)

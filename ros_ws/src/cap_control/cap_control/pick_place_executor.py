@@ -9,9 +9,16 @@ the arm moves, with a message that names the target and what is allowed. After t
 perception to answer from an observation made after it, and a placed object seen off the table or away from its
 target fails the run (OBJECT_DROPPED), so the result agrees with where the object really is.
 
-Every wait is on an event: a port's future completing, an interruption, or a timeout; none polls. The ports are
-small abstract classes that the ROS node implements over its action clients, services and /joint_states, and unit
-tests implement with fakes.
+Every wait sleeps on one condition that a port's future completing, an interruption or a timeout wakes, with one
+exception: after the retreat, perception is asked again every FRESH_VIEW_RETRY until it answers from an observation
+made after the retreat (perception has no event for "a newer observation"). The ports are small abstract classes
+that the ROS node implements over its action clients, services and /joint_states, and unit tests implement with
+fakes.
+
+A goal counts as running from the moment it is sent, not only once the server accepts it: a cancel or stop while
+the acceptance is awaited cancels it too (the port sends the cancel once the server has the goal), so a result that
+says the arm stopped is true. If the controller does not confirm the cancel within service_timeout, the result
+says so instead.
 """
 from __future__ import annotations
 
@@ -124,7 +131,11 @@ class PendingGoal(abc.ABC):
 
     @abc.abstractmethod
     def cancel(self) -> Future:
-        """Ask the server to cancel; completes once it has taken the cancel (it then holds where it is)."""
+        """Ask the server to cancel; completes once it has taken the cancel (it then holds where it is).
+
+        May come before `accepted` completes: the cancel is then sent once the server has the goal (the future
+        completes then), and a refused goal completes it at once (it never moved).
+        """
 
 
 class Arm(abc.ABC):
@@ -133,7 +144,7 @@ class Arm(abc.ABC):
 
     @abc.abstractmethod
     def server_ready(self) -> Future:
-        """Completes once the trajectory server can take goals."""
+        """Completes once the trajectory server can take goals; cancelled when the executor stops waiting."""
 
     @abc.abstractmethod
     def joints(self) -> Future:
@@ -157,7 +168,7 @@ class Gripper(abc.ABC):
 
     @abc.abstractmethod
     def server_ready(self) -> Future:
-        """Completes once the gripper server can take goals."""
+        """Completes once the gripper server can take goals; cancelled when the executor stops waiting."""
 
     @abc.abstractmethod
     def command(self, position: float, max_effort: float) -> PendingGoal:
@@ -169,7 +180,7 @@ class Perception(abc.ABC):
 
     @abc.abstractmethod
     def state_service_ready(self) -> Future:
-        """Completes once the object state service can be called."""
+        """Completes once the object state service can be called; cancelled when the executor stops waiting."""
 
     @abc.abstractmethod
     def names_available(self) -> bool:
@@ -205,6 +216,16 @@ class PickPlaceOutcome:
     code: PickPlaceErrorCode
     message: str = ''
     final_position: tuple[float, float, float] | None = None
+    # Interrupted runs: whether the controller confirmed the cancel of the goal that was running (True: none was).
+    halt_confirmed: bool = True
+
+
+def interruption_message(ending: Ending, stop_source: str, halt_confirmed: bool, timeout: float) -> str:
+    """The message of a run ended by a cancel (`ending` CANCELLED) or by a stop from `stop_source`."""
+    how = 'cancelled' if ending == Ending.CANCELLED else f'stopped by {stop_source}'
+    if halt_confirmed:
+        return f'{how}: the arm stopped where it was'
+    return f'{how}, but the controller did not confirm the cancel of its goal within {timeout:.0f} s'
 
 
 class Interruption:
@@ -255,7 +276,7 @@ class PickPlaceExecutor:
         self.arm, self.gripper, self.perception = arm, gripper, perception
         self.config, self.timeouts = config, timeouts
         self.stop_source = stop_source  # named in the message of a stopped run
-        self._log = log or (lambda level, message: None)
+        self.log = log or (lambda level, message: None)  # log(level, message), level 'debug', 'info' or 'warning'
 
     def run(self, request: PickPlaceRequest, interruption: Interruption,
             feedback: FeedbackCallback = lambda stage, progress: None) -> PickPlaceOutcome:
@@ -264,19 +285,21 @@ class PickPlaceExecutor:
             plan = run.plan(request)
             run.execute(plan, feedback)
             final = run.object_state(plan.object.name)
-            self._log('info', f'placed the {plan.object.name} on {plan.target_description}')
+            self.log('info', f'placed the {plan.object.name} on {plan.target_description}')
             return PickPlaceOutcome(Ending.SUCCEEDED, PickPlaceErrorCode.NONE, '',
                                     final.position if final.success else None)
         except _Interrupted:
-            run.cancel_active_goal()
-            if interruption.reason == Ending.CANCELLED:
-                return PickPlaceOutcome(Ending.CANCELLED, PickPlaceErrorCode.CANCELLED,
-                                        'cancelled: the arm stopped where it was')
-            return PickPlaceOutcome(Ending.STOPPED, PickPlaceErrorCode.CANCELLED,
-                                    f'stopped by {self.stop_source}: the arm stopped where it was')
+            confirmed = run.cancel_active_goal()
+            ending = Ending.CANCELLED if interruption.reason == Ending.CANCELLED else Ending.STOPPED
+            if not confirmed:
+                self.log('warning', 'the controller did not confirm the cancel of the running goal')
+            return PickPlaceOutcome(ending, PickPlaceErrorCode.CANCELLED,
+                                    interruption_message(ending, self.stop_source, confirmed,
+                                                         self.timeouts.service_timeout),
+                                    halt_confirmed=confirmed)
         except (_Failed, PickPlaceError) as failure:
             run.cancel_active_goal()
-            self._log('warning', f'pick-and-place failed: {failure.message}')
+            self.log('warning', f'pick-and-place failed: {failure.message}')
             return PickPlaceOutcome(Ending.FAILED, failure.code, failure.message)
 
 
@@ -313,7 +336,10 @@ class _Run:
         return self.wait(future, timeout, f'no answer from {what} within {timeout:.0f} s')
 
     def available(self, future: Future, what: str) -> None:
-        self.wait(future, self.timeouts.server_timeout, f'{what} is not available')
+        try:
+            self.wait(future, self.timeouts.server_timeout, f'{what} is not available')
+        finally:
+            future.cancel()  # no-op once done; otherwise tells the port to stop looking
 
     def pause(self, seconds: float) -> None:
         """Wait `seconds`, or less if interrupted (then raise)."""
@@ -388,9 +414,11 @@ class _Run:
         feedback(plan.stages[-1].name, 1.0)
 
     def _send(self, goal: PendingGoal, what: str, refusal: str) -> None:
-        if not self.answer(goal.accepted, self.timeouts.service_timeout, what):
-            raise _Failed(PickPlaceErrorCode.UNKNOWN, refusal)
+        # Active before the acceptance comes: an interruption or timeout while waiting for it cancels the goal too.
         self.active = goal
+        if not self.answer(goal.accepted, self.timeouts.service_timeout, what):
+            self.active = None
+            raise _Failed(PickPlaceErrorCode.UNKNOWN, refusal)
 
     def move(self, plan: PickPlacePlan, step: TrajectoryStep) -> None:
         trajectory = plan.trajectory_for(step, self.current_joints())
@@ -407,7 +435,7 @@ class _Run:
         if step.stop_on_contact and outcome.result == ArmResult.TOLERANCE_VIOLATED:
             # Touched down before the planned height (on the way, or in the last millimetres, where the arm ends
             # a few milliradians short of its goal): placing ends here.
-            self.executor._log('debug', f'touched down: {outcome.message}')
+            self.executor.log('debug', f'touched down: {outcome.message}')
             return
         raise _Failed(PickPlaceErrorCode.UNKNOWN, f'the arm did not complete its motion: {outcome.message}')
 
@@ -440,13 +468,14 @@ class _Run:
                 return
             if report.stamp >= cleared_at:
                 if not report.visible:
-                    self.executor._log('warning', f'the {name} is out of the camera\'s sight after placing; its '
-                                       f'position is the one last seen')
+                    self.executor.log('warning', f'the {name} is out of the camera\'s sight after placing; its '
+                                      f'position is the one last seen')
                 return
             if time.monotonic() > deadline:
-                self.executor._log('warning', f'perception saw nothing newer than the place within '
-                                   f'{self.timeouts.view_timeout:.0f} s; going on with what it has')
+                self.executor.log('warning', f'perception saw nothing newer than the place within '
+                                  f'{self.timeouts.view_timeout:.0f} s; going on with what it has')
                 return
+            # A timed retry: perception offers no event for "an observation newer than t".
             self.pause(FRESH_VIEW_RETRY)
 
     def check(self, plan: PickPlacePlan, stage: Stage, observation: Observation) -> None:
@@ -465,11 +494,14 @@ class _Run:
             if failure:
                 raise _Failed(stage.failure_code, failure)
 
-    def cancel_active_goal(self) -> None:
+    def cancel_active_goal(self) -> bool:
+        """Cancel the goal sent last, accepted or not yet; True once the server has taken the cancel (or none ran).
+
+        The controller holds the arm (or the fingers) where they are; answer only once it has taken the cancel.
+        """
         goal, self.active = self.active, None
         if goal is None:
-            return
-        # The controller holds the arm (or the fingers) where they are; answer only once it has taken the cancel.
+            return True
         done = threading.Event()
         goal.cancel().add_done_callback(lambda _: done.set())
-        done.wait(self.timeouts.service_timeout)
+        return done.wait(self.timeouts.service_timeout)

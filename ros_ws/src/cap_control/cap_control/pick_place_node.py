@@ -8,12 +8,17 @@ cartesian_limits.speed), MotionSettings and ExecutionConfig, whose fields hold e
 
 Threading: every callback is in one reentrant group, and main() spins a MultiThreadedExecutor, so the execute
 callback may wait on service and action futures whose done callbacks other executor threads run.
+
+Two waits are timed retries, because rclpy offers no event for what they wait for: whether an action server or
+service is available is looked at every READY_CHECK_PERIOD (a timer on the steady clock, so simulated time, which
+may run faster than real time or not at all before the first /clock, does not pace it), and `_mark_canceling`
+waits out, in short sleeps, the moment the action server marks a cancelled goal CANCELING.
 """
 from __future__ import annotations
 
 import threading
 import time
-from concurrent.futures import Future
+from concurrent.futures import Future, InvalidStateError
 from typing import Any, Callable
 
 import rclpy
@@ -21,6 +26,7 @@ from cap_ros_common.parameters import declare_config
 from cap_ros_common.time import to_seconds
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -31,19 +37,20 @@ from cap_control.kinematics import JOINT_NAMES
 from cap_control.pick_place import PickPlaceConfig, PickPlaceErrorCode, StageName
 from cap_control.pick_place_executor import (
     Arm, Ending, ExecutionConfig, Gripper, GripperOutcome, Interruption, MotionSettings, PendingGoal, Perception,
-    PickPlaceExecutor, PickPlaceRequest,
+    PickPlaceExecutor, PickPlaceRequest, interruption_message,
 )
 from cap_control.trajectory import JointTrajectory
 from cap_interfaces.action import FollowJointTrajectory, GripperCommand, PickPlace
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 
-READY_CHECK_PERIOD = 0.02  # [s] between looks at a server's availability (rclpy has no event for it)
+READY_CHECK_PERIOD = 0.02  # [s] steady time between looks at a server's availability (rclpy has no event for it)
 
 
-def _relay(source, convert: Callable[[Any], Any] = lambda value: value) -> Future:
-    """A concurrent Future completed (through `convert`) when the rclpy future `source` completes."""
-    target: Future = Future()
+def _relay(source, convert: Callable[[Any], Any] = lambda value: value, target: Future | None = None) -> Future:
+    """A concurrent Future (`target`, or a new one) completed through `convert` when the rclpy future `source`
+    completes."""
+    target = Future() if target is None else target
 
     def done(finished) -> None:
         try:
@@ -62,12 +69,20 @@ def _done() -> Future:
 
 
 class _ActionGoal(PendingGoal):
-    """A goal of an rclpy action client as the executor's PendingGoal."""
+    """A goal of an rclpy action client as the executor's PendingGoal.
+
+    A cancel asked for before the server's answer to the goal is remembered and sent as soon as the goal handle
+    comes (only a handle can cancel a goal); its future completes once the server has taken it, or at once when
+    the goal was refused or never reached the server.
+    """
 
     def __init__(self, client: ActionClient, goal, convert: Callable[[Any], Any]):
         self._accepted: Future = Future()
         self._result: Future = Future()  # replaced by the relay of the result once accepted
         self._handle = None
+        self._sent = False  # the server's answer to the goal came (or sending failed)
+        self._early_cancel: Future | None = None  # a cancel asked for before that
+        self._lock = threading.Lock()
         self._convert = convert
         client.send_goal_async(goal).add_done_callback(self._on_sent)
 
@@ -81,19 +96,39 @@ class _ActionGoal(PendingGoal):
 
     def _on_sent(self, future) -> None:
         try:
-            self._handle = future.result()
+            handle = future.result()
         except Exception as error:  # noqa: BLE001
+            self._settle(None)
             self._accepted.set_exception(error)
             return
-        if not self._handle.accepted:
-            self._accepted.set_result(False)
+        if handle.accepted:
+            # The result relay is in place before anyone learns of the acceptance.
+            self._result = _relay(handle.get_result_async(), lambda response: self._convert(response.result))
+        self._settle(handle)
+        self._accepted.set_result(bool(handle.accepted))
+
+    def _settle(self, handle) -> None:
+        """Keep the handle (None: sending failed) and send a cancel that was asked for before it came."""
+        with self._lock:
+            self._handle, self._sent = handle, True
+            early, self._early_cancel = self._early_cancel, None
+        if early is None:
             return
-        # The result relay is in place before anyone learns of the acceptance.
-        self._result = _relay(self._handle.get_result_async(), lambda response: self._convert(response.result))
-        self._accepted.set_result(True)
+        if handle is not None and handle.accepted:
+            _relay(handle.cancel_goal_async(), target=early)
+        else:
+            early.set_result(None)  # refused or never sent: nothing moves
 
     def cancel(self) -> Future:
-        return _done() if self._handle is None else _relay(self._handle.cancel_goal_async())
+        with self._lock:
+            if not self._sent:
+                if self._early_cancel is None:
+                    self._early_cancel = Future()
+                return self._early_cancel
+            handle = self._handle
+        if handle is None or not handle.accepted:
+            return _done()
+        return _relay(handle.cancel_goal_async())
 
 
 class _ArmPort(Arm):
@@ -164,6 +199,8 @@ class PickPlaceNode(Node):
         self.timeouts = declare_config(self, ExecutionConfig)
 
         self._callbacks = callbacks = ReentrantCallbackGroup()
+        # Readiness looks go by wall time: with use_sim_time the node's clock is the simulator's.
+        self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
         self._joint_lock = threading.Lock()
         self._joint_state: JointState | None = None
         self._joint_waiters: list[Future] = []
@@ -239,22 +276,37 @@ class PickPlaceNode(Node):
         return future
 
     def when_ready(self, ready: Callable[[], bool]) -> Future:
-        """Completes once `ready()` holds, looked at every READY_CHECK_PERIOD until server_timeout has passed."""
+        """Completes once `ready()` holds, looked at every READY_CHECK_PERIOD of steady time until server_timeout
+        (wall time) has passed; then it stays pending. Cancelling the future stops the looking."""
         future: Future = Future()
         if ready():
             future.set_result(None)
             return future
-        looks = [int(self.timeouts.server_timeout / READY_CHECK_PERIOD) + 1]
+        deadline = time.monotonic() + self.timeouts.server_timeout
+        ended = threading.Event()
+        lock = threading.Lock()
+
+        def end(*_: Any) -> None:
+            # Ready, given up, or the waiter stopped waiting (cancelled the future): the timer goes.
+            with lock:
+                if ended.is_set():
+                    return
+                ended.set()
+            self.destroy_timer(timer)  # a no-op if the node went first (it destroyed its timers then)
 
         def look() -> None:
-            looks[0] -= 1
+            if ended.is_set():
+                return
             if ready():
-                future.set_result(None)
-            if future.done() or looks[0] <= 0:
-                timer.cancel()
-                self.destroy_timer(timer)
+                try:
+                    future.set_result(None)  # ends the timer through the done callback
+                except InvalidStateError:
+                    pass  # cancelled meanwhile
+            elif time.monotonic() >= deadline:
+                end()
 
-        timer = self.create_timer(READY_CHECK_PERIOD, look, callback_group=self._callbacks)
+        timer = self.create_timer(READY_CHECK_PERIOD, look, callback_group=self._callbacks, clock=self._steady_clock)
+        future.add_done_callback(end)
         return future
 
     # ------------------------------------------------------------------------------------------- inputs
@@ -316,7 +368,8 @@ class PickPlaceNode(Node):
                 goal_handle.succeed()
             elif outcome.ending == Ending.CANCELLED or (outcome.ending == Ending.STOPPED
                                                         and goal_handle.is_cancel_requested):
-                result.error_msg = 'cancelled: the arm stopped where it was'
+                result.error_msg = interruption_message(Ending.CANCELLED, GraphNames.STOP_TOPIC,
+                                                        outcome.halt_confirmed, self.timeouts.service_timeout)
                 if _mark_canceling(goal_handle):
                     goal_handle.canceled()
                 else:

@@ -4,19 +4,18 @@ import math
 import numpy as np
 import pytest
 
+from cap_tabletop.objects import BLOCK_SIZE
+from cap_tabletop.workspace import CORNERS, MIDDLE, SIDES, TABLE_X_RANGE, TABLE_Y_RANGE
+
 from cap_control.kinematics import (
     ARM_REACH, HOME_JOINTS, JOINT_LOWER, JOINT_UPPER, IKError, forward_kinematics, inverse_kinematics,
     inverse_kinematics_all, is_reachable_top_down, pose_error, top_down_pose, top_down_reach_margin,
 )
 
-TABLE_X = (-0.3, 0.3)
-TABLE_Y = (-0.8, -0.2)
-BLOCK_CENTRE_HEIGHT = 0.02
-NAMED_POSITIONS = {
-    'top left corner': (-0.25, -0.25), 'top side': (0.0, -0.25), 'top right corner': (0.25, -0.25),
-    'left side': (-0.25, -0.5), 'middle': (0.0, -0.5), 'right side': (0.25, -0.5),
-    'bottom left corner': (-0.25, -0.75), 'bottom side': (0.0, -0.75), 'bottom right corner': (0.25, -0.75),
-}
+TABLE_X = TABLE_X_RANGE
+TABLE_Y = TABLE_Y_RANGE
+BLOCK_CENTRE_HEIGHT = BLOCK_SIZE / 2
+NAMED_POSITIONS = {**CORNERS, **SIDES, 'middle': MIDDLE}
 
 
 def random_table_poses(count: int, seed: int) -> list[np.ndarray]:

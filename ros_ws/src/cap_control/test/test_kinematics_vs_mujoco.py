@@ -1,15 +1,14 @@
 """Our UR5e forward kinematics agrees with MuJoCo's on the simulator's own arm model (site "tcp")."""
-import pathlib
-
 import mujoco
 import numpy as np
 import pytest
+from cap_sim_bridge.scenes import MODELS_DIR
+from cap_tabletop.workspace import TABLE_X_RANGE, TABLE_Y_RANGE
 
 from cap_control.kinematics import JOINT_LOWER, JOINT_NAMES, JOINT_UPPER, forward_kinematics, inverse_kinematics, \
     top_down_pose
 
-SCENE = (pathlib.Path(__file__).resolve().parents[2] / 'cap_sim_bridge' / 'cap_sim_bridge' / 'models'
-         / 'tabletop.xml')
+SCENE = MODELS_DIR / 'tabletop.xml'
 
 
 @pytest.fixture(scope='module')
@@ -42,6 +41,6 @@ def test_forward_kinematics_matches_mujoco_over_random_joint_vectors(sim):
 def test_ik_solutions_put_the_simulated_tcp_on_the_table_targets(sim):
     rng = np.random.default_rng(7)
     for _ in range(100):
-        target = top_down_pose((rng.uniform(-0.3, 0.3), rng.uniform(-0.8, -0.2), rng.uniform(0.02, 0.3)),
+        target = top_down_pose((rng.uniform(*TABLE_X_RANGE), rng.uniform(*TABLE_Y_RANGE), rng.uniform(0.02, 0.3)),
                                rng.uniform(-np.pi, np.pi))
         np.testing.assert_allclose(mujoco_tcp_pose(sim, inverse_kinematics(target)), target, atol=1e-6)

@@ -5,6 +5,8 @@ import re
 import numpy as np
 import pytest
 from cap_interfaces.action import PickPlace
+from cap_tabletop import objects
+from cap_tabletop.cameras import TOP
 
 from cap_control.kinematics import HOME_JOINTS, forward_kinematics, inverse_kinematics, top_down_pose
 from cap_control.pick_place import (
@@ -14,16 +16,16 @@ from cap_control.pick_place import (
 )
 from cap_control.trajectory import UR5E_LIMITS, trajectory_tcp_positions
 
-BLOCK_SIZE = (0.04, 0.04, 0.04)
+BLOCK_SIZE = (objects.BLOCK_SIZE,) * 3
 STAGE_ORDER = ['approach', 'descend', 'grasp', 'verify', 'lift', 'move', 'place', 'release', 'retreat']
 
 
 def block(name: str, x: float, y: float, yaw: float = 0.0, z: float = 0.02) -> ObjectInfo:
-    return ObjectInfo(name, (x, y, z), BLOCK_SIZE, 'block', yaw)
+    return ObjectInfo(name, (x, y, z), BLOCK_SIZE, objects.CATEGORY_BLOCK, yaw)
 
 
 def bowl(name: str, x: float, y: float) -> ObjectInfo:
-    return ObjectInfo(name, (x, y, 0.03), (0.14, 0.14, 0.06), 'bowl')
+    return ObjectInfo(name, (x, y, 0.03), (0.14, 0.14, 0.06), objects.CATEGORY_BOWL)
 
 
 def trajectory_steps(plan):
@@ -135,7 +137,7 @@ def test_the_fingers_close_across_the_side_with_room_when_a_neighbour_stands_clo
 
 @pytest.mark.parametrize('spot', [(0.0, -0.5), (-0.27, -0.77), (0.27, -0.23), (0.25, -0.5)])
 def test_with_a_camera_to_clear_the_tool_ends_out_of_its_line_of_sight_to_the_placed_block(spot):
-    camera = (0.0, -0.5, 0.85)
+    camera = TOP.position
     red = block('red block', 0.15, -0.45)
     config = PickPlaceConfig(clear_view_from=camera)
     plan = plan_pick_place(red, spot, HOME_JOINTS, config)
@@ -144,8 +146,9 @@ def test_with_a_camera_to_clear_the_tool_ends_out_of_its_line_of_sight_to_the_pl
     tcp = forward_kinematics(steps[-1].trajectory.end)[:3, 3]
     assert tcp[2] == pytest.approx(plan.travel_z, abs=1e-3)
     # The line of sight from the camera to the block, at the tool's height, passes well beside the tool.
-    block_top = np.array([spot[0], spot[1], 0.04])
-    at_tool_height = block_top + (np.array(camera) - block_top) * (tcp[2] - 0.04) / (camera[2] - 0.04)
+    top = objects.BLOCK_SIZE  # the block rests on the table
+    block_top = np.array([spot[0], spot[1], top])
+    at_tool_height = block_top + (np.array(camera) - block_top) * (tcp[2] - top) / (camera[2] - top)
     assert np.linalg.norm(at_tool_height[:2] - tcp[:2]) > 0.1
     # Without a camera to clear, the tool waits above the block.
     assert len(stage(plan_pick_place(red, spot, HOME_JOINTS), StageName.RETREAT).steps) == 1

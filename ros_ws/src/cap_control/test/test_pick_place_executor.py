@@ -47,10 +47,37 @@ class FakeGoal(PendingGoal):
         return done()
 
 
+class SlowlyAcceptedGoal(FakeGoal):
+    """A goal whose acceptance comes only when `answer(accepted)` is called. A cancel asked for before that is
+    taken once the goal is accepted (its future completes then), and at once if the goal is refused, as the
+    PendingGoal contract says."""
+
+    def __init__(self):
+        super().__init__()
+        self._accepted = Future()
+        self.cancel_asked = threading.Event()
+
+    def answer(self, accepted: bool) -> None:
+        self._accepted.set_result(accepted)
+
+    def cancel(self) -> Future:
+        self.cancel_asked.set()
+        taken: Future = Future()
+
+        def on_answer(accepted: Future) -> None:
+            if accepted.result():
+                self.cancelled.set()
+            taken.set_result(None)
+
+        self._accepted.add_done_callback(on_answer)
+        return taken
+
+
 class FakeWorld(Arm, Gripper, Perception):
     """Arm, gripper and perception of a table with objects: a closed gripper over a block holds it, and opening
     it sets the block down under the tool. `contact_at_place` makes the place descent stop on contact half way;
-    `hang_in` names a stage whose motion never ends; `drop_to` is where a released block ends instead."""
+    `hang_in` names a stage whose motion never ends, `slow_accept_in` one whose goal waits for its acceptance;
+    `drop_to` is where a released block ends instead."""
 
     def __init__(self, objects: list[ObjectInfo], stages: list[StageName]):
         self.objects = {o.name: o for o in objects}
@@ -63,6 +90,7 @@ class FakeWorld(Arm, Gripper, Perception):
         self.goals: list[FakeGoal] = []
         self.contact_at_place = False
         self.hang_in: StageName | None = None
+        self.slow_accept_in: StageName | None = None
         self.moving = threading.Event()
         self.drop_to: tuple[float, float, float] | None = None
         self.missing_object = False  # nothing between the fingers when they close
@@ -84,8 +112,8 @@ class FakeWorld(Arm, Gripper, Perception):
     def follow(self, trajectory, contact_tolerance) -> PendingGoal:
         stage = self.stages[-1]
         self.trajectories.append((stage, trajectory, contact_tolerance))
-        if stage == self.hang_in:
-            goal = FakeGoal()
+        if stage in (self.hang_in, self.slow_accept_in):
+            goal = FakeGoal() if stage == self.hang_in else SlowlyAcceptedGoal()
             self.goals.append(goal)
             self.moving.set()
             return goal
@@ -200,6 +228,62 @@ def test_a_stop_or_cancel_mid_motion_cancels_the_arm_goal_and_moves_nothing_more
     assert world.goals[-1].cancelled.is_set(), 'the running trajectory was cancelled'
     assert world.stage_motions()[-1] == StageName.MOVE and stages[-1] == StageName.MOVE
     assert world.held == 'red block'
+
+
+@pytest.mark.parametrize('how', ['stop', 'cancel'])
+def test_a_stop_or_cancel_while_the_arm_goal_awaits_acceptance_cancels_it_once_accepted(table, how):
+    world, _, stages = table
+    world.slow_accept_in = StageName.MOVE
+    # Long waits: the run waits for the cancel to be taken until this test lets the goal be accepted.
+    executor = PickPlaceExecutor(world, world, world, PickPlaceConfig(),
+                                 ExecutionConfig(service_timeout=60.0, server_timeout=60.0), stop_source='/cap/stop')
+    interruption = Interruption()
+    outcomes = []
+    runner = threading.Thread(target=lambda: outcomes.append(
+        run(executor, stages, PickPlaceRequest('red block', 'blue bowl'), interruption)))
+    runner.start()
+    assert world.moving.wait(30.0)
+    goal = world.goals[-1]
+    interruption.stop() if how == 'stop' else interruption.cancel()
+    assert goal.cancel_asked.wait(30.0), 'the goal not yet accepted was cancelled'
+    assert runner.is_alive() and not outcomes, 'the run waits until the controller has taken the cancel'
+    goal.answer(True)
+    runner.join(30.0)
+    (outcome,) = outcomes
+    assert goal.cancelled.is_set(), 'the cancel reached the goal once it was accepted'
+    assert outcome.code == PickPlaceErrorCode.CANCELLED and outcome.halt_confirmed
+    assert (outcome.ending, outcome.message) == (
+        (Ending.STOPPED, 'stopped by /cap/stop: the arm stopped where it was') if how == 'stop' else
+        (Ending.CANCELLED, 'cancelled: the arm stopped where it was'))
+    assert world.stage_motions()[-1] == StageName.MOVE and stages[-1] == StageName.MOVE
+
+
+def test_a_stop_while_the_acceptance_never_comes_says_the_cancel_was_not_confirmed(table):
+    world, executor, stages = table
+    world.slow_accept_in = StageName.MOVE
+    interruption = Interruption()
+    outcomes = []
+    runner = threading.Thread(target=lambda: outcomes.append(
+        run(executor, stages, PickPlaceRequest('red block', 'blue bowl'), interruption)))
+    runner.start()
+    assert world.moving.wait(30.0)
+    interruption.stop()
+    runner.join(30.0)
+    (outcome,) = outcomes
+    assert world.goals[-1].cancel_asked.is_set()
+    assert (outcome.ending, outcome.code, outcome.halt_confirmed) == (Ending.STOPPED, PickPlaceErrorCode.CANCELLED,
+                                                                      False)
+    assert outcome.message == ('stopped by /cap/stop, but the controller did not confirm the cancel of its goal '
+                               'within 0 s')
+
+
+def test_an_acceptance_that_times_out_still_cancels_the_goal(table):
+    world, executor, stages = table
+    world.slow_accept_in = StageName.APPROACH
+    outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
+    assert (outcome.ending, outcome.code) == (Ending.FAILED, PickPlaceErrorCode.TIMEOUT)
+    assert outcome.message == 'no answer from the arm controller within 0 s'
+    assert world.goals[-1].cancel_asked.is_set(), 'a late acceptance would not start the motion unwatched'
 
 
 def test_contact_on_the_place_descent_ends_it_and_the_retreat_starts_where_the_arm_stopped(table):
