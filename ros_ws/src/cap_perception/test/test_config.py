@@ -11,7 +11,7 @@ CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config' / 'perception.ya
 
 def test_yaml_overrides_only_declared_parameters():
     document = yaml.safe_load(CONFIG.read_text(encoding='utf-8'))
-    overrides = document['perception_node']['ros__parameters'] or {}
+    overrides = document['/**/perception_node']['ros__parameters'] or {}
     assert set(overrides) <= set(parameter_names(PerceptionConfig))
 
 
