@@ -98,8 +98,8 @@ def test_cap_stop_halts_the_arm_within_half_a_second_of_simulated_time(ros_conte
         assert np.allclose(world.joint_positions(), held, atol=1e-3)
         # Perception's answers reach every client of its services in the process; none of the graph's own
         # clients may sit on the multi-threaded executor, where each answer would cost a Python wait-set rebuild.
-        perception_services = {'/' + GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE,
-                               '/' + GraphNames.PERCEPTION_OBJECT_STATE_SERVICE}  # as resolved (no namespace)
+        # A client's srv_name is the name it was created with (relative, as GraphNames spells it).
+        perception_services = {GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE}
         executors = (graph.graph.executor, graph.graph.events_executor)
         clients = [(node.get_name(), client.srv_name) for executor in executors for node in executor.get_nodes()
                    for client in node.clients if client.srv_name in perception_services]

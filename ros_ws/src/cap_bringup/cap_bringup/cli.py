@@ -150,6 +150,7 @@ def send(command: str, server_timeout: float, timeout: float, out=None, namespac
     deadline = time.monotonic() + timeout
     session = _Session('cap_send', namespace)
     client = ActionClient(session.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
+    execute_name = session.node.resolve_topic_name(GraphNames.EXECUTE_ACTION)  # e.g. /robot1/cap/execute
     session.node.create_subscription(String, GraphNames.SAY_TOPIC, lambda m: _say(f'robot says: {m.data}', out),
                                      10)
     stage_names = {getattr(StatusEvent, name): name[len('STAGE_'):].lower()
@@ -192,8 +193,8 @@ def send(command: str, server_timeout: float, timeout: float, out=None, namespac
     try:
         if not session.spin_until(client.server_is_ready, min(server_timeout, left())):
             if left() <= 0.01:  # the overall deadline, not --wait, ended the wait
-                return timed_out(f'waiting for lmp_node ({GraphNames.EXECUTE_ACTION})')
-            _error(f'error: nobody offers {GraphNames.EXECUTE_ACTION}; is the graph up (cap up)? '
+                return timed_out(f'waiting for lmp_node ({execute_name})')
+            _error(f'error: nobody offers {execute_name}; is the graph up (cap up)? '
                    f'ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}')
             return EXIT_UNREACHABLE
         _say(f'> {command}', out)
@@ -243,7 +244,7 @@ def stop(server_timeout: float, namespace: str = '') -> int:
     try:
         publisher = session.node.create_publisher(Empty, GraphNames.STOP_TOPIC, 10)
         if not session.spin_until(lambda: publisher.get_subscription_count() > 0, server_timeout):
-            _error(f'error: nobody listens on {GraphNames.STOP_TOPIC}')
+            _error(f'error: nobody listens on {session.node.resolve_topic_name(GraphNames.STOP_TOPIC)}')
             return EXIT_UNREACHABLE
         publisher.publish(Empty())
         # Give DDS a moment to deliver before the process exits.

@@ -145,7 +145,8 @@ class RosTabletopApi:
             goal.target_position = Point(x=x, y=y, z=0.0)
             where = f'({x:.3f}, {y:.3f})'
         if not self._pick_place.wait_for_server(timeout_sec=self.service_timeout_s):
-            raise RobotApiError(f'the pick-and-place controller ({GraphNames.PICK_PLACE_ACTION}) is not running')
+            name = self._client_node.resolve_topic_name(GraphNames.PICK_PLACE_ACTION)
+            raise RobotApiError(f'the pick-and-place controller ({name}) is not running')
         started = time.monotonic()
         goal_handle = self._wait(self._pick_place.send_goal_async(goal), self.service_timeout_s,
                                  'the pick-and-place controller')
