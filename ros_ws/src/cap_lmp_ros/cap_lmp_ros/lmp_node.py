@@ -137,7 +137,8 @@ class LmpNode(Node):
         control = MutuallyExclusiveCallbackGroup()
         self.create_subscription(String, GraphNames.COMMAND_TOPIC, self._on_command, COMMAND_QOS,
                                  callback_group=control)
-        self.create_subscription(Empty, GraphNames.STOP_TOPIC, lambda _: self.stop('stopped on /cap/stop'),
+        stopped = f'stopped on {self.resolve_topic_name(GraphNames.STOP_TOPIC)}'  # /cap/stop, or under the namespace
+        self.create_subscription(Empty, GraphNames.STOP_TOPIC, lambda _: self.stop(stopped),
                                  COMMAND_QOS, callback_group=control)
         self.create_service(Trigger, GraphNames.RESET_SESSION_SERVICE, self._on_reset, callback_group=control)
         self._action = ActionServer(self, ExecuteCommand, GraphNames.EXECUTE_ACTION, self._execute_goal,
