@@ -72,6 +72,13 @@ class LMPConfig:
     callable_from_code: bool = False  # generated code may call this LMP by name: name(query, context='')
     max_tokens: int = 512
     temperature: float = 0.0
+    # The answer continues the query's text instead of following it on a new line, and the program is the query
+    # followed by the answer: for prompts that end inside a function (HumanEval's signature and docstring).
+    answer_continues_query: bool = False
+    # A benchmark harness's own rules for this LMP's programs, applied before the sandbox checks them (HumanEval's
+    # imports become provided names); it may raise to refuse a program. None for every robot LMP.
+    prepare_source: Callable[[str], str] | None = None
+    generate_functions: bool = True  # False: a call of an undefined function is an error in this LMP's code
 
 
 @dataclass(frozen=True)
@@ -248,6 +255,8 @@ class Engine:
         if context:
             parts.append(context)
         parts.append(f'{config.query_prefix}{query}{config.query_suffix}')
+        if config.answer_continues_query:
+            return '\n'.join(part for part in parts if part)
         return '\n'.join(parts) + '\n'
 
     def _ask(self, config: LMPConfig, query: str, context: str) -> str:
@@ -305,7 +314,12 @@ class Engine:
     def _prepare(self, config: LMPConfig, code: str) -> PreparedCode:
         tree = self.sandbox.check(code)
         functions: list[tuple[str, CompiledProgram]] = []
-        self._define_missing(tree, self._known_names(), (), functions)
+        if config.generate_functions:
+            self._define_missing(tree, self._known_names(), (), functions)
+        else:
+            missing = undefined_calls(tree, self._known_names())
+            if missing:
+                raise GenerationError(f'the code calls {missing[0].name}(), which is not defined')
         prepared = PreparedCode(self.sandbox.compile_checked(tree, code, config.name), tuple(functions))
         check_program_size(prepared.full_code(), 'the program with the functions generated for it')
         return prepared
@@ -327,6 +341,9 @@ class Engine:
             self._emit(GENERATING, self.fgen_lmp, message=f'define function: {missing.signature}')
             source = self._ask(self.lmps[self.fgen_lmp], f'define function: {missing.signature}', '')
             self._stats.generated.append(missing.name)
+            fgen = self.lmps[self.fgen_lmp]
+            if fgen.prepare_source is not None:
+                source = fgen.prepare_source(source)
             try:
                 function_tree = self.sandbox.check(source)
             except CodeRejected as error:
@@ -344,6 +361,11 @@ class Engine:
         config = self.lmps[lmp]
         self._emit(GENERATING, lmp, message=query)
         code = self._ask(config, query, context)
+        if config.answer_continues_query:
+            code = f'{config.query_prefix}{query}{config.query_suffix}{code}'
+            check_program_size(code, 'the query with the answer')
+        if config.prepare_source is not None:
+            code = config.prepare_source(code)
         return self._prepare(config, code)
 
     # -- execution -------------------------------------------------------------------------------------------

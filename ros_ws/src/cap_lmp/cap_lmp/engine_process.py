@@ -29,6 +29,7 @@ from typing import Any, Callable
 
 from cap_lmp import wire
 from cap_lmp.sandbox.jail import enter_jail
+from cap_lmp.engine import CommandResult
 from cap_lmp.errors import CodeRejected, LLMError, RobotApiError
 from cap_lmp.llm import Completion, CompletionRequest
 from cap_lmp.wire import API_ERRORS, MAX_CODE_CHARS, MAX_PROMPT_CHARS, MEMORY_EXIT_CODE
@@ -202,7 +203,15 @@ def serve(connection: Connection, control: Connection) -> None:
             run_id = message.get('run')
             runs['current'] = run_id if isinstance(run_id, int) else 0
             channel.call_seconds.clear()
-            result = dataclasses.asdict(engine.run(str(message.get('command', ''))))
+            lmp, context = message.get('lmp'), message.get('context')
+            command = str(message.get('command', ''))
+            if lmp is not None and (not isinstance(lmp, str) or lmp not in engine.lmps):
+                outcome = CommandResult(command=command, command_id=0, success=False,
+                                        message=f'this session has no LMP named {str(lmp)[:100]!r}',
+                                        error_type='ValueError')
+            else:
+                outcome = engine.run(command, lmp, context if isinstance(context, str) else None)
+            result = dataclasses.asdict(outcome)
             result['outcome'] = result['outcome'].value
             result['code'] = result['code'][:MAX_CODE_CHARS]  # the node accepts at most wire.MAX_RESULT_BYTES
             channel.send({'op': 'result', 'result': result, 'api_call_seconds': channel.call_seconds[-10_000:]})

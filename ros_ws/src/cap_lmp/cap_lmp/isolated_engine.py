@@ -382,8 +382,10 @@ class IsolatedEngine:
         except OSError:
             pass  # the process is gone or not listening: run() ends it after the grace period
 
-    def run(self, command: str) -> CommandResult:
-        """Run one command in the sandbox process. Never raises for problems of the generated code."""
+    def run(self, command: str, lmp: str | None = None, context: str | None = None) -> CommandResult:
+        """Run one command in the sandbox process (with the session's default LMP, or `lmp`; `context` instead of
+        the LMP's own context line). Never raises for problems of the generated code; an LMP the session does not
+        have is a failed result."""
         with self._run_lock:
             started = time.monotonic()
             if self._closed:
@@ -401,7 +403,7 @@ class IsolatedEngine:
                 self._cancel_at = None
                 self._running = True
             try:
-                return self._run(command, started)
+                return self._run(command, started, lmp, context)
             finally:
                 with self._state_lock:
                     self._running = False
@@ -452,12 +454,14 @@ class IsolatedEngine:
         self.restarts += 1
         self._start()
 
-    def _run(self, command: str, started: float) -> CommandResult:
+    def _run(self, command: str, started: float, lmp: str | None = None,
+             context: str | None = None) -> CommandResult:
         code = ''
         clock = self._clock = _Clock()
         limit_s = self.limits.time_limit_s + KILL_MARGIN_S
+        run_lmp = lmp or self.default_lmp
         try:
-            self._send({'op': 'run', 'command': command, 'run': self._run_id})
+            self._send({'op': 'run', 'command': command, 'run': self._run_id, 'lmp': lmp, 'context': context})
             last_heard = clock.started
             while True:
                 message = self._receive(0.05)
@@ -467,7 +471,7 @@ class IsolatedEngine:
                     op = message.get('op')
                     if op == 'event':
                         event = _event(message)
-                        if event.lmp == self.default_lmp:
+                        if event.lmp == run_lmp:
                             if event.stage == CODE:
                                 code = event.code
                             elif event.stage == EXECUTING:
