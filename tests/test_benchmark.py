@@ -21,7 +21,10 @@ def test_one_oracle_episode_per_task_and_group(ros_isolation, tmp_path):
     assert failures == []
     assert (tmp_path / 'report.md').read_text().count('\n| ') >= 22
     assert (tmp_path / 'report.png').stat().st_size > 1000
-    assert json.loads((tmp_path / 'report.json').read_text())['overall']['percent'] == 100.0
+    report = json.loads((tmp_path / 'report.json').read_text())
+    assert report['overall']['percent'] == 100.0
+    assert report['policy'].startswith('oracle') and 'oracle programs' in report['title']
+    assert 'Policy: oracle' in (tmp_path / 'report.md').read_text()
 
 
 @pytest.mark.slow

@@ -5,9 +5,7 @@ import json
 import pathlib
 from typing import Iterable, Mapping
 
-import cv2
-import numpy as np
-
+from cap_bench.charts import Bar, bar_chart
 from cap_bench.templates import GROUPS
 
 # The Code as Policies paper's simulated table-top results (code-davinci-002), % success per row.
@@ -52,8 +50,9 @@ def _percent(value: float | None) -> str:
     return '—' if value is None else f'{value:.1f}'
 
 
-def markdown(summary: Mapping, title: str) -> str:
-    lines = [f'# {title}', '', '| group | task | trials | this run % | paper (CaP) % |', '|---|---|---|---|---|']
+def markdown(summary: Mapping, title: str, policy: str = '') -> str:
+    lines = [f'# {title}', ''] + ([f'Policy: {policy}', ''] if policy else [])
+    lines += ['| group | task | trials | this run % | paper (CaP) % |', '|---|---|---|---|---|']
     for row in (r for r in summary['rows'] if r['trials']):
         lines.append(f"| {row['group']} | {row['template']} | {row['trials']} | {_percent(row['percent'])} | "
                      f"{row['paper']:.0f} |")
@@ -65,30 +64,23 @@ def markdown(summary: Mapping, title: str) -> str:
     return '\n'.join(lines) + '\n'
 
 
-def chart(summary: Mapping, path: pathlib.Path) -> None:
-    """Horizontal bars per row: this run (blue) above the paper (gray)."""
+def chart(summary: Mapping, path: pathlib.Path, title_lines: list[str]) -> None:
+    """Bars per row, then the group totals and the overall figure, with the run's title and policy on top."""
     rows = [r for r in summary['rows'] if r['trials']] or summary['rows']
-    row_height, left, width = 26, 260, 460
-    image = np.full((row_height * len(rows) + 60, left + width + 60, 3), 255, np.uint8)
-    cv2.putText(image, 'success % (blue: this run, gray: paper)', (10, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.55,
-                (0, 0, 0), 1, cv2.LINE_AA)
-    for i, row in enumerate(rows):
-        y = 40 + i * row_height
-        cv2.putText(image, f"{row['group']} {row['template']}", (10, y + 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
-                    (0, 0, 0), 1, cv2.LINE_AA)
-        paper = int(width * row['paper'] / 100)
-        cv2.rectangle(image, (left, y + 12), (left + paper, y + 20), (170, 170, 170), -1)
-        if row['percent'] is not None:
-            ours = int(width * row['percent'] / 100)
-            cv2.rectangle(image, (left, y + 2), (left + ours, y + 11), (167, 121, 78), -1)
-            cv2.putText(image, f"{row['percent']:.0f}", (left + ours + 4, y + 11), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
-                        (0, 0, 0), 1, cv2.LINE_AA)
-    cv2.imwrite(str(path), image)
+    bars = [Bar(f"{row['group']} {row['template']}", row['percent'], row['paper'],
+                f"{row['successes']}/{row['trials']}") for row in rows]
+    bars += [Bar(f'{group} total', totals['percent'], totals['paper'], f"{totals['successes']}/{totals['trials']}",
+                 bold=True) for group, totals in summary['groups'].items() if totals['trials']]
+    overall = summary['overall']
+    bars.append(Bar('all', overall['percent'], None, f"{overall['successes']}/{overall['trials']}", bold=True))
+    bar_chart(path, title_lines, bars)
 
 
-def write_report(records: list[Mapping], out_dir: pathlib.Path, title: str) -> dict:
+def write_report(records: list[Mapping], out_dir: pathlib.Path, title: str, policy: str = '') -> dict:
+    """report.json, report.md and report.png; `policy` names who wrote the programs (oracle or which model)."""
     summary = summarise(records)
+    summary.update(title=title, policy=policy)
     (out_dir / 'report.json').write_text(json.dumps(summary, indent=2))
-    (out_dir / 'report.md').write_text(markdown(summary, title))
-    chart(summary, out_dir / 'report.png')
+    (out_dir / 'report.md').write_text(markdown(summary, title, policy))
+    chart(summary, out_dir / 'report.png', [title] + ([f'policy: {policy}'] if policy else []))
     return summary

@@ -62,6 +62,21 @@ class BenchOptions:
     first_domain_id: int | None = None  # job i runs on first_domain_id + i; None: see domain_ids()
 
 
+def policy_name(options: BenchOptions) -> str:
+    """Short: 'oracle programs' or the model's name."""
+    if options.policy == 'oracle':
+        return 'oracle programs'
+    return f"model {options.model or os.environ.get('CAP_LLM_MODEL', '') or '(unnamed)'}"
+
+
+def policy_description(options: BenchOptions) -> str:
+    """Who wrote the programs, for reports."""
+    if options.policy == 'oracle':
+        return 'oracle: the reference program of each episode, replayed from a cassette (no model)'
+    url = options.base_url or os.environ.get('CAP_LLM_BASE_URL', '') or '(CAP_LLM_BASE_URL)'
+    return f'{policy_name(options)} at {url}, {options.api} API'
+
+
 def domain_ids(jobs: int, first: int | None = None, environ: dict[str, str] | None = None) -> list[int]:
     """The ROS_DOMAIN_ID of each of `jobs` parallel graphs: consecutive ids from `first`, else from the
     environment's ROS_DOMAIN_ID, else from a process-id-dependent start in 1..101."""
@@ -309,9 +324,9 @@ def run_benchmark(options: BenchOptions, show_progress: bool = True) -> dict:
         _run_shards(shards, options, cassette, out_dir, show_progress, len(episodes), len(episodes) - len(todo))
     records = [r for r in load_records(out_dir)
                if r['key'] in {episode_key(e.group, e.template, e.seed) for e in episodes}]
-    title = (f"Table-top benchmark: policy {options.policy}, perception {options.perception}, "
+    title = (f"Table-top benchmark ({policy_name(options)}): perception {options.perception}, "
              f"{options.trials} trial(s) per row")
-    summary = write_report(records, out_dir, title)
+    summary = write_report(records, out_dir, title, policy_description(options))
     summary['wall_seconds_this_run'] = time.monotonic() - started
     summary['episodes'] = len(records)
     return summary
