@@ -1,0 +1,1 @@
+"""Robot code generation: 37 functions to write from their signature alone, judged on seeded test inputs."""
