@@ -1,0 +1,1 @@
+"""HumanEval (Chen et al. 2021) run in the project's sandbox: the problems and what the harness allows."""
