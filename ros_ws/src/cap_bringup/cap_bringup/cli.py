@@ -337,10 +337,15 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
 
 
 BENCH_USAGE = """usage: cap bench tabletop [options]   (options: cap bench tabletop --help)
+       cap bench codegen | humaneval | reasoning [options]
 
 The paper's simulated table-top benchmark through the cap-ros graph, e.g.
     cap bench tabletop --trials 1                   one episode of every row with the reference programs
     cap bench tabletop --policy llm --jobs 2        programs from CAP_LLM_BASE_URL / CAP_LLM_MODEL, two graphs
+The paper's language-side tables through the engine and the sandbox process (no graph), e.g.
+    cap bench codegen                               robot code generation, flat and hierarchical (oracle)
+    cap bench humaneval --policy llm --jobs 2       HumanEval with the model at CAP_LLM_BASE_URL
+    cap bench reasoning --policy llm                spatial reasoning: code, vanilla and chain-of-thought answers
 """
 
 
