@@ -48,6 +48,7 @@ from cap_lmp.errors import CapLLMError, CodeRejected, ExecutionStopped, Generati
 from cap_lmp.functions import top_level_functions, undefined_calls
 from cap_lmp.llm import Completion, CompletionRequest, LLMClient
 from cap_lmp.outcome import Outcome, outcome_of
+from cap_lmp.provided_imports import drop_provided_imports
 from cap_lmp.sandbox import SANDBOX_FILE_PREFIX, CompiledProgram, Sandbox, SandboxLimits, bounded_exception_text
 from cap_lmp.wire import MAX_PROGRAM_CHARS
 
@@ -312,6 +313,7 @@ class Engine:
         return set(self.scope) | set(self.scope['__builtins__'])
 
     def _prepare(self, config: LMPConfig, code: str) -> PreparedCode:
+        code = drop_provided_imports(code, self._known_names())
         tree = self.sandbox.check(code)
         functions: list[tuple[str, CompiledProgram]] = []
         if config.generate_functions:
@@ -344,6 +346,7 @@ class Engine:
             fgen = self.lmps[self.fgen_lmp]
             if fgen.prepare_source is not None:
                 source = fgen.prepare_source(source)
+            source = drop_provided_imports(source, self._known_names())
             try:
                 function_tree = self.sandbox.check(source)
             except CodeRejected as error:

@@ -1,7 +1,8 @@
 """In-process sandbox for model-written policy code: AST checks, rewritten operators, restricted names, a watchdog.
 
 What a program goes through
-1. **AST check** (`check_code`): refuses imports; `global`; class definitions; async code; `with`; `try ... finally`
+1. **AST check** (`check_code`): refuses imports (the engine first drops imports of names the scope already holds,
+   `import numpy as np`, see cap_lmp/provided_imports.py); `global`; class definitions; async code; `with`; `try ... finally`
    and bare `except:` (either could keep running after a stop); any name starting with `__`; any attribute starting
    with `_`; frame, generator, coroutine, traceback and code attributes (`gi_`, `f_`, `cr_`, `ag_`, `tb_`, `co_`
    prefixes, `mro`); NumPy's file and raw-memory attributes (`tofile`, `dump`, `ctypes`, ...); attribute assignment
