@@ -393,8 +393,12 @@ def build_parser() -> argparse.ArgumentParser:
     p_up.add_argument('--domain', default='tabletop', help='the domain whose prompts, robot API and scene run '
                       '[tabletop]')
     commands.add_parser('demo', help='run the table-top demo (options: cap demo --help)', add_help=False)
-    commands.add_parser('bench', help='the paper\'s table-top benchmark (cap bench tabletop --help)', add_help=False)
-    p_send = commands.add_parser('send', help='run a natural-language command and follow it to the end')
+    commands.add_parser('bench', help='the paper\'s benchmarks: tabletop, codegen, humaneval, reasoning (cap bench '
+                        '--help)', add_help=False)
+    p_send = commands.add_parser('send', help='run a natural-language command and follow it to the end',
+                                 epilog='exit status: 0 the program ran to the end (whether it did what was asked '
+                                        'is for you to see), 1 it failed or was refused, 2 no graph or '
+                                        'misconfigured, 3 --timeout passed, 130/143 Ctrl-C/SIGTERM')
     p_send.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_send.add_argument('text', help='the command, e.g. "put the red block in the blue bowl"')
     p_send.add_argument('--timeout', type=float, default=600.0, help='give up after this many seconds [600]')

@@ -17,8 +17,10 @@ class LmpNodeConfig:
     record_cassette: bool = parameter(False, 'With llm_backend=http: also record every answer into `cassette`.')
     base_url: str = parameter('', 'OpenAI-compatible endpoint; empty: CAP_LLM_BASE_URL.')
     model: str = parameter('', 'Model name; empty: CAP_LLM_MODEL.')
-    api: str = parameter('chat', 'chat (chat completions) or completions (legacy completions).')
-    request_timeout_s: float = parameter(60.0, 'Timeout of one model request [s].')
+    api: str = parameter('', 'chat (chat completions) or completions (legacy completions); empty: CAP_LLM_API, '
+                         'else chat.')
+    request_timeout_s: float = parameter(0.0, 'Timeout of one HTTP attempt of a model request [s]; 0: '
+                                         'CAP_LLM_TIMEOUT_S, else 60.')
     time_limit_s: float = parameter(300.0, 'Wall-clock limit of one generated program, robot motion included [s].')
     service_timeout_s: float = parameter(5.0, 'Timeout of one perception request [s].')
     motion_timeout_s: float = parameter(180.0, 'Timeout of one pick-and-place [s].')

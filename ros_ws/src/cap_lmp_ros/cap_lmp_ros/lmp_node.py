@@ -91,7 +91,12 @@ class LmpNode(Node):
         if config.jail not in JAIL_MODES:
             raise ValueError(f'parameter jail={config.jail!r} is not one of {", ".join(JAIL_MODES)}')
 
-        http_options: dict[str, Any] = {'timeout_s': config.request_timeout_s, 'api': config.api}
+        # Unset parameters leave the environment's CAP_LLM_* values (OpenAICompatibleClient.from_env) in force.
+        http_options: dict[str, Any] = {}
+        if config.api:
+            http_options['api'] = config.api
+        if config.request_timeout_s > 0:
+            http_options['timeout_s'] = config.request_timeout_s
         if config.base_url:
             http_options['base_url'] = config.base_url
         if config.model:
@@ -106,8 +111,10 @@ class LmpNode(Node):
                               'record': config.record_cassette, **http_options}
         else:
             raise ValueError(f'parameter llm_backend={config.llm_backend!r} is not one of cassette, http')
-        if config.api not in ('chat', 'completions'):
-            raise ValueError(f'parameter api={config.api!r} is not one of chat, completions')
+        api = config.api or os.environ.get('CAP_LLM_API', 'chat')
+        if api not in ('chat', 'completions'):
+            source = 'parameter api' if config.api else 'CAP_LLM_API'
+            raise ValueError(f'{source}={api!r} is not one of chat, completions')
 
         self._code_publisher = self.create_publisher(String, GraphNames.CODE_TOPIC, EVENT_QOS)
         self._status_publisher = self.create_publisher(StatusEvent, GraphNames.STATUS_TOPIC, EVENT_QOS)

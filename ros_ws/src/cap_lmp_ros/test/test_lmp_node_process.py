@@ -61,3 +61,25 @@ def test_a_watch_reports_the_first_death_once_in_one_printable_line():
     stopped.stop()  # shutting down: a thread ending by an exception then is no failure
     stopped.start(lambda: 1 / 0, 'late').join()
     assert not stopped.died.is_set() and len(lines) == 1
+
+
+def test_the_environment_chooses_the_protocol_and_timeout_unless_a_parameter_does(ros_context, monkeypatch):
+    monkeypatch.setenv('CAP_LLM_API', 'completions')
+    monkeypatch.setenv('CAP_LLM_TIMEOUT_S', '7.5')
+    monkeypatch.setenv('CAP_LLM_BASE_URL', 'http://127.0.0.1:9/v1')
+    http = [Parameter('llm_backend', value='http'), Parameter('model', value='m'),
+            Parameter('sandbox_process', value=False)]
+    from_environment = LmpNode(context=ros_context, parameter_overrides=http)
+    try:
+        assert (from_environment.engine.client.api, from_environment.engine.client.timeout_s) == ('completions', 7.5)
+    finally:
+        from_environment.destroy_node()
+    chosen = LmpNode(context=ros_context, parameter_overrides=http + [Parameter('api', value='chat'),
+                                                                        Parameter('request_timeout_s', value=3.0)])
+    try:
+        assert (chosen.engine.client.api, chosen.engine.client.timeout_s) == ('chat', 3.0)
+    finally:
+        chosen.destroy_node()
+    monkeypatch.setenv('CAP_LLM_API', 'telepathy')
+    with pytest.raises(ValueError, match="CAP_LLM_API='telepathy' is not one of chat, completions"):
+        LmpNode(context=ros_context, parameter_overrides=http)
