@@ -55,7 +55,7 @@ def write_report(out_dir: pathlib.Path, title: str, policy: str, rows: Sequence[
         lines += [''] + [f'- {note}' for note in notes]
     (out_dir / 'report.md').write_text('\n'.join(lines) + '\n', encoding='utf-8')
     bars = [Bar(_chart_label(row), row.percent, row.paper,
-                f'{row.passed}/{row.items}' if row.metric == 'pass' else f'n={row.items}', row.group == 'all')
+                f'n={row.items}' if row.metric.startswith('pass@') else f'{row.passed}/{row.items}', row.group == 'all')
             for row in rows]
     bar_chart(out_dir / 'report.png', [title, f'policy: {policy}'], bars)
     return summary

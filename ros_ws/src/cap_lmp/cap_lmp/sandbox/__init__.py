@@ -2,15 +2,15 @@
 
 What a program goes through
 1. **AST check** (`check_code`): refuses imports (the engine first drops imports of names the scope already holds,
-   `import numpy as np`, see cap_lmp/provided_imports.py); `global`; class definitions; async code; `with`; `try ... finally`
-   and bare `except:` (either could keep running after a stop); any name starting with `__`; any attribute starting
-   with `_`; frame, generator, coroutine, traceback and code attributes (`gi_`, `f_`, `cr_`, `ag_`, `tb_`, `co_`
-   prefixes, `mro`); NumPy's file and raw-memory attributes (`tofile`, `dump`, `ctypes`, ...); attribute assignment
-   and deletion; the names exec, eval, compile, open, getattr, setattr, delattr, hasattr, globals, locals, vars, dir,
-   type, object, super, input, breakpoint, help, memoryview; the string methods translate and maketrans; class
-   patterns in `match` except a builtin type's own `case int(x):` (a class pattern reads attributes with a plain
-   getattr, past every guard); f-string format specs that are nested or wider than the limit. `nonlocal` is
-   allowed: it reaches only the enclosing function's own variables.
+   `import numpy as np`, see cap_lmp/provided_imports.py); `global`; class definitions; async code; `with`; `try ...
+   finally` and bare `except:` (either could keep running after a stop); any name starting with `__`; any attribute
+   starting with `_`; frame, generator, coroutine, traceback and code attributes (`gi_`, `f_`, `cr_`, `ag_`, `tb_`,
+   `co_` prefixes, `mro`); NumPy's file and raw-memory attributes (`tofile`, `dump`, `ctypes`, ...); attribute
+   assignment and deletion; the names exec, eval, compile, open, getattr, setattr, delattr, hasattr, globals, locals,
+   vars, dir, type, object, super, input, breakpoint, help, memoryview; the string methods translate and maketrans;
+   class patterns in `match` except a builtin type's own `case int(x):` (a class pattern reads attributes with a plain
+   getattr, past every guard); f-string format specs that are nested or wider than the limit. `nonlocal` is allowed: it
+   reaches only the enclosing function's own variables.
 2. **Rewrite**: every binary and augmented operator, every single comparison and every attribute read becomes a call
    to a checked helper (`guards.py`), every loop body starts with a call to a checkpoint, and every
    comprehension step, function body and lambda checks that the tracer is still installed (one C call; if it is
