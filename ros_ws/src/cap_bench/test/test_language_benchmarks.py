@@ -6,13 +6,16 @@ records, so the tests read those."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import pytest
 
 from cap_bench.codegen import bench as codegen
 from cap_bench.codegen.problems import CATEGORIES, WRONG_SOURCES, problem
 from cap_bench.humaneval import bench as humaneval
-from cap_bench.language.policy import PolicyOptions
+from cap_bench.language.policy import PolicyOptions, open_client
 from cap_bench.language.runner import ITEMS_FILE
 from cap_bench.reasoning import bench as reasoning
 from cap_bench.reasoning.questions import QUESTIONS
@@ -153,9 +156,6 @@ def test_reasoning_oracle_answers_every_question_three_ways_and_wrong_answers_fa
 
 
 def _cap(*args, env=None):
-    import os
-    import subprocess
-    import sys
     return subprocess.run([sys.executable, '-m', 'cap_bringup.cli', *args], capture_output=True, text=True,
                           timeout=300, env={**os.environ, **(env or {})})
 
@@ -198,8 +198,8 @@ HUMANEVAL_CHEATS = {
 }
 
 
-def _evaluate(module, evaluator_of, answers, keys):
-    with module.open_client(ORACLE, answers) as client:
+def _evaluate(evaluator_of, answers, keys):
+    with open_client(ORACLE, answers) as client:
         evaluator = evaluator_of(client)
         try:
             return {key: evaluator.evaluate(key) for key in keys}
@@ -209,8 +209,7 @@ def _evaluate(module, evaluator_of, answers, keys):
 
 def test_humaneval_completions_that_tamper_with_the_test_fail():
     keys = [f'flat/{task}/0' for task in HUMANEVAL_CHEATS]
-    records = _evaluate(humaneval, lambda client: humaneval.HumanEvalEvaluator(client, SandboxLimits(30), 'required',
-                                                                                0.0),
+    records = _evaluate(lambda client: humaneval.HumanEvalEvaluator(client, SandboxLimits(30), 'required', 0.0),
                         humaneval.oracle_answers(HUMANEVAL_CHEATS), keys)
     outcomes = {key.split('/', 1)[1][:-2]: (r['passed'], r['reason']) for key, r in records.items()}
     assert not any(passed for passed, _ in outcomes.values()), outcomes
@@ -229,7 +228,7 @@ def test_codegen_answers_that_flood_or_steer_the_host_fail():
         numeric.name: (f'def {numeric.name}({numeric_arguments}):\n    for i in range(200):\n'
                        '        report(i)\n    return 0\n'),
     }
-    records = _evaluate(codegen, lambda client: codegen.CodegenEvaluator(client, SandboxLimits(10), 'required'),
+    records = _evaluate(lambda client: codegen.CodegenEvaluator(client, SandboxLimits(10), 'required'),
                         codegen.oracle_answers(cheats), [f'flat/flat/{name}' for name in cheats])
     reasons = {key.rsplit('/', 1)[1]: r['reason'] for key, r in records.items() if not r['passed']}
     assert set(reasons) == set(cheats)
@@ -239,7 +238,7 @@ def test_codegen_answers_that_flood_or_steer_the_host_fail():
 
 def test_a_huge_text_answer_is_judged_in_bounded_time_and_fails():
     position = next(q for q in QUESTIONS if q.kind == 'position')
-    records = _evaluate(reasoning, lambda client: reasoning.ReasoningEvaluator(client, SandboxLimits(10), 'required'),
+    records = _evaluate(lambda client: reasoning.ReasoningEvaluator(client, SandboxLimits(10), 'required'),
                         reasoning.oracle_answers({('code', position.id): "ret_val = '1' * 200000\n"}),
                         [f'code/{position.id}'])
     record = records[f'code/{position.id}']

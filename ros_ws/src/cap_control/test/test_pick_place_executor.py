@@ -180,6 +180,15 @@ def run(executor, stages, request, interruption=None):
     return executor.run(request, interruption, lambda stage, progress: stages.append(stage))
 
 
+def start_run(executor, stages, interruption):
+    """Move the red block to the blue bowl on a thread of its own; the outcome lands in the returned list."""
+    outcomes = []
+    runner = threading.Thread(target=lambda: outcomes.append(
+        run(executor, stages, PickPlaceRequest('red block', 'blue bowl'), interruption)))
+    runner.start()
+    return runner, outcomes
+
+
 def test_a_block_goes_into_the_bowl_through_every_stage(table):
     world, executor, stages = table
     outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
@@ -211,10 +220,7 @@ def test_a_stop_or_cancel_mid_motion_cancels_the_arm_goal_and_moves_nothing_more
     world, executor, stages = table
     world.hang_in = StageName.MOVE
     interruption = Interruption()
-    outcomes = []
-    runner = threading.Thread(target=lambda: outcomes.append(
-        run(executor, stages, PickPlaceRequest('red block', 'blue bowl'), interruption)))
-    runner.start()
+    runner, outcomes = start_run(executor, stages, interruption)
     assert world.moving.wait(30.0)
     interruption.stop() if how == 'stop' else interruption.cancel()
     runner.join(30.0)
@@ -238,10 +244,7 @@ def test_a_stop_or_cancel_while_the_arm_goal_awaits_acceptance_cancels_it_once_a
     executor = PickPlaceExecutor(world, world, world, PickPlaceConfig(),
                                  ExecutionConfig(service_timeout=60.0, server_timeout=60.0), stop_source='/cap/stop')
     interruption = Interruption()
-    outcomes = []
-    runner = threading.Thread(target=lambda: outcomes.append(
-        run(executor, stages, PickPlaceRequest('red block', 'blue bowl'), interruption)))
-    runner.start()
+    runner, outcomes = start_run(executor, stages, interruption)
     assert world.moving.wait(30.0)
     goal = world.goals[-1]
     interruption.stop() if how == 'stop' else interruption.cancel()
@@ -262,10 +265,7 @@ def test_a_stop_while_the_acceptance_never_comes_says_the_cancel_was_not_confirm
     world, executor, stages = table
     world.slow_accept_in = StageName.MOVE
     interruption = Interruption()
-    outcomes = []
-    runner = threading.Thread(target=lambda: outcomes.append(
-        run(executor, stages, PickPlaceRequest('red block', 'blue bowl'), interruption)))
-    runner.start()
+    runner, outcomes = start_run(executor, stages, interruption)
     assert world.moving.wait(30.0)
     interruption.stop()
     runner.join(30.0)

@@ -312,14 +312,23 @@ class Engine:
     def _known_names(self) -> set[str]:
         return set(self.scope) | set(self.scope['__builtins__'])
 
+    @staticmethod
+    def _source(config: LMPConfig, code: str, known: set[str]) -> str:
+        """The program as the sandbox checks it: the harness's own rules (prepare_source), then the imports of
+        names the scope already holds dropped."""
+        if config.prepare_source is not None:
+            code = config.prepare_source(code)
+        return drop_provided_imports(code, known)
+
     def _prepare(self, config: LMPConfig, code: str) -> PreparedCode:
-        code = drop_provided_imports(code, self._known_names())
+        known = self._known_names()
+        code = self._source(config, code, known)
         tree = self.sandbox.check(code)
         functions: list[tuple[str, CompiledProgram]] = []
         if config.generate_functions:
-            self._define_missing(tree, self._known_names(), (), functions)
+            self._define_missing(tree, known, (), functions)
         else:
-            missing = undefined_calls(tree, self._known_names())
+            missing = undefined_calls(tree, known)
             if missing:
                 raise GenerationError(f'the code calls {missing[0].name}(), which is not defined')
         prepared = PreparedCode(self.sandbox.compile_checked(tree, code, config.name), tuple(functions))
@@ -341,12 +350,10 @@ class Engine:
                 raise GenerationError(f'the code needed more than {self.max_generated_functions} new functions; '
                                       'giving up')
             self._emit(GENERATING, self.fgen_lmp, message=f'define function: {missing.signature}')
-            source = self._ask(self.lmps[self.fgen_lmp], f'define function: {missing.signature}', '')
-            self._stats.generated.append(missing.name)
             fgen = self.lmps[self.fgen_lmp]
-            if fgen.prepare_source is not None:
-                source = fgen.prepare_source(source)
-            source = drop_provided_imports(source, self._known_names())
+            source = self._ask(fgen, f'define function: {missing.signature}', '')
+            self._stats.generated.append(missing.name)
+            source = self._source(fgen, source, known)
             try:
                 function_tree = self.sandbox.check(source)
             except CodeRejected as error:
@@ -367,8 +374,6 @@ class Engine:
         if config.answer_continues_query:
             code = f'{config.query_prefix}{query}{config.query_suffix}{code}'
             check_program_size(code, 'the query with the answer')
-        if config.prepare_source is not None:
-            code = config.prepare_source(code)
         return self._prepare(config, code)
 
     # -- execution -------------------------------------------------------------------------------------------

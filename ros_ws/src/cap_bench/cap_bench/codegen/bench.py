@@ -23,9 +23,9 @@ from cap_bench.codegen.problems import CATEGORIES, PROBLEMS, Problem, cases, pro
     reference_source
 from cap_bench.codegen.world import CodegenWorld
 from cap_bench.language.cli import add_common_arguments, choose, policy_of, run_main
-from cap_bench.language.policy import PolicyOptions, open_client
+from cap_bench.language.policy import PolicyOptions
 from cap_bench.language.report import ReportRow, write_report
-from cap_bench.language.runner import run_items
+from cap_bench.language.runner import run_with_policy
 from cap_bench.language.session import EvaluationSession, harness_lmp
 from cap_lmp.engine import Engine, LMPConfig
 from cap_lmp.llm import LLMClient
@@ -97,20 +97,20 @@ class CodegenEvaluator:
         self._cases: list[Any] = []
         self._actions: list[list[Any]] = []
         self._case: int | None = None  # the case begun and not yet ended
-        self._variant: tuple[str, str] = ('', '')
         self.sessions: dict[tuple[str, str], EvaluationSession] = {}
+
+    def _testing(self) -> bool:
+        return any(session.testing for session in self.sessions.values())  # one item at a time per job
 
     def _begin_case(self, index: int) -> None:
         # Only the test program, once per case and in order: a model's function that calls these fails the test.
-        session = self.sessions.get(self._variant)
-        if session is None or not session.testing or self._case is not None or index != len(self._actions):
+        if not self._testing() or self._case is not None or index != len(self._actions):
             raise ValueError('begin_case() belongs to the test program')
         self._case = index
         self.world.begin_case(self._cases[index].scene)
 
     def _end_case(self) -> None:
-        session = self.sessions.get(self._variant)
-        if session is None or not session.testing or self._case is None:
+        if not self._testing() or self._case is None:
             raise ValueError('end_case() belongs to the test program')
         self._actions.append(list(self.world.actions))
         self._case = None
@@ -128,7 +128,6 @@ class CodegenEvaluator:
         prompt, generation, name = key.split('/')
         item = problem(name)
         session = self.session(prompt, generation)
-        self._variant = (prompt, generation)
         session.reset()
         started = time.monotonic()
         record: dict[str, Any] = {'benchmark': 'codegen', 'variant': variant_name(prompt, generation),
@@ -210,11 +209,10 @@ def run(options: PolicyOptions, out: pathlib.Path, *, prompts: Sequence[str] = P
     keys = item_keys(prompts, generations, limit)
     limits = SandboxLimits(time_limit_s=time_limit_s)
     started = time.monotonic()
-    with open_client(options, oracle_answers() if answers is None else answers) as client:
-        settings = {'benchmark': 'codegen', 'policy': options.describe(client), 'time_limit_s': time_limit_s}
-        records = run_items(keys, lambda: CodegenEvaluator(client, limits, jail), out, jobs=jobs, resume=resume,
-                            show_progress=show_progress, label='codegen', settings=settings)
-        policy = options.describe(client)
+    records, policy = run_with_policy('codegen', options, oracle_answers() if answers is None else answers, keys,
+                                      lambda client: CodegenEvaluator(client, limits, jail), out, jobs=jobs,
+                                      resume=resume, show_progress=show_progress,
+                                      settings={'time_limit_s': time_limit_s})
     rows = summarise(records, prompts, generations)
     notes = ['Problems written here in the paper\'s categories and counts (16 NumPy, 4 controls, 10 Shapely, '
              '7 robot API); paper figures: Code as Policies, RoboCodeGen, code-davinci-002.',

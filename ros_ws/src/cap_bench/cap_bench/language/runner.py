@@ -13,6 +13,9 @@ import queue
 import threading
 from typing import Any, Callable, Mapping, Protocol, Sequence
 
+from cap_bench.language.policy import PolicyOptions, open_client
+from cap_lmp.llm import LLMClient
+
 ITEMS_FILE = 'items.jsonl'
 SETTINGS_FILE = 'run.json'
 
@@ -75,9 +78,11 @@ def run_items(keys: Sequence[str], make_evaluator: Callable[[], Evaluator], out_
     errors: list[BaseException] = []
     wanted = set(keys)
     counts = {'finished': len(keys) - todo.qsize(), 'passed': sum(passed(r) for k, r in done.items() if k in wanted)}
-    if path.exists() and path.stat().st_size and not path.read_bytes().endswith(b'\n'):
-        with path.open('a', encoding='utf-8') as stream:  # a line cut short by an interruption stays alone
-            stream.write('\n')
+    if path.exists() and path.stat().st_size:
+        with path.open('rb+') as stream:  # a line cut short by an interruption stays alone
+            stream.seek(-1, 2)
+            if stream.read(1) != b'\n':
+                stream.write(b'\n')
     bar, task = _progress(show_progress, label, len(keys), counts['finished'])
 
     def work() -> None:
@@ -129,6 +134,20 @@ def run_items(keys: Sequence[str], make_evaluator: Callable[[], Evaluator], out_
         raise RuntimeError(f'a benchmark job failed: {type(errors[0]).__name__}: {errors[0]} '
                            '(the items finished so far are kept; continue with --resume)') from errors[0]
     return [done[key] for key in keys if key in done]
+
+
+def run_with_policy(benchmark: str, options: PolicyOptions, answers: Sequence[tuple[str, str]],
+                    keys: Sequence[str], make_evaluator: Callable[[LLMClient], Evaluator], out_dir: pathlib.Path, *,
+                    jobs: int = 1, resume: bool = False, show_progress: bool = True,
+                    settings: Mapping[str, Any] | None = None) -> tuple[list[dict[str, Any]], str]:
+    """run_items with the policy's client (for the oracle, its server lives as long as the run); the records and
+    the line that names the policy. The policy and `settings` are the run's settings (run.json)."""
+    with open_client(options, answers) as client:
+        policy = options.describe(client)
+        records = run_items(keys, lambda: make_evaluator(client), out_dir, jobs=jobs, resume=resume,
+                            show_progress=show_progress, label=benchmark,
+                            settings={'benchmark': benchmark, 'policy': policy, **(settings or {})})
+    return records, policy
 
 
 def _progress(show: bool, label: str, total: int, completed: int) -> tuple[Any, Any]:

@@ -14,9 +14,9 @@ import time
 from typing import Any, Callable, Mapping, Sequence
 
 from cap_bench.language.cli import add_common_arguments, choose, policy_of, run_main
-from cap_bench.language.policy import PolicyOptions, open_client
+from cap_bench.language.policy import PolicyOptions
 from cap_bench.language.report import ReportRow, write_report
-from cap_bench.language.runner import run_items
+from cap_bench.language.runner import run_with_policy
 from cap_bench.language.session import EvaluationSession, ModelCall, harness_lmp
 from cap_bench.reasoning.answers import (LANGUAGE_STOP, code_query, context_line, judge, language_prompt,
                                          normalise_code_answer, parse_answer)
@@ -147,11 +147,10 @@ def run(options: PolicyOptions, out: pathlib.Path, *, styles: Sequence[str] = ST
     keys = item_keys(styles, limit)
     limits = SandboxLimits(time_limit_s=time_limit_s)
     started = time.monotonic()
-    with open_client(options, oracle_answers() if answers is None else answers) as client:
-        settings = {'benchmark': 'reasoning', 'policy': options.describe(client), 'time_limit_s': time_limit_s}
-        records = run_items(keys, lambda: ReasoningEvaluator(client, limits, jail), out, jobs=jobs, resume=resume,
-                            show_progress=show_progress, label='reasoning', settings=settings)
-        policy = options.describe(client)
+    records, policy = run_with_policy('reasoning', options, oracle_answers() if answers is None else answers, keys,
+                                      lambda client: ReasoningEvaluator(client, limits, jail), out, jobs=jobs,
+                                      resume=resume, show_progress=show_progress,
+                                      settings={'time_limit_s': time_limit_s})
     notes = ['Questions written here in the paper\'s two sets; positions correct within 1 cm. Paper figures: '
              'Code as Policies, code-davinci-002 (vanilla 35 %, chain of thought 58 %, code 98 %).']
     return write_report(out, f'Spatial-geometric reasoning ({len(QUESTIONS)} questions): code vs. language',
