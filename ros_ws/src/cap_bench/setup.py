@@ -29,6 +29,7 @@ setup(
             'codegen = cap_bench.codegen.bench:main',
             'humaneval = cap_bench.humaneval.bench:main',
             'reasoning = cap_bench.reasoning.bench:main',
+            'devset = cap_bench.devset.bench:main',
         ],
     },
 )

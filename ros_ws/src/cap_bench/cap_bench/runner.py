@@ -17,6 +17,7 @@ episodes*.jsonl, and the command exits 130 or 143 (continue later with --resume)
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import multiprocessing
@@ -26,7 +27,7 @@ import queue
 import signal
 import sys
 import time
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 import yaml
@@ -34,13 +35,17 @@ import yaml
 from cap_bench.episodes import Episode, sample_episode
 from cap_bench.oracle import oracle_program
 from cap_bench.report import write_report
-from cap_bench.success import check
+from cap_bench.success import Verdict, check
 from cap_bench.templates import GROUPS, TEMPLATES
-from cap_lmp.safe_text import terminal_text
+from cap_lmp.errors import LLMError
+from cap_lmp.local_server import MODEL_READY_TIMEOUT_S
+from cap_lmp.safe_text import one_line, terminal_text
 from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT
 from cap_tabletop.cameras import DEFAULT_CAMERA
 
 SETTLE_S = 0.5  # simulated time the scene settles after the program before it is judged
+# A graph's services answer in milliseconds; beside a model server on a loaded 2-core machine, seconds.
+SERVICE_TIMEOUT_S = 60.0
 MAX_DOMAIN_ID = 232  # the largest ROS_DOMAIN_ID whose DDS ports are valid
 
 
@@ -60,6 +65,9 @@ class BenchOptions:
     api: str = 'chat'
     episode_timeout_s: float = 900.0
     first_domain_id: int | None = None  # job i runs on first_domain_id + i; None: see domain_ids()
+    backend: str = 'http'  # for policy=llm: 'http' (base_url) or 'local' (a llama.cpp server started for the run)
+    model_file: str = ''  # for backend=local; empty: the default model of `make model`
+    model_threads: int = 1
 
 
 def policy_name(options: BenchOptions) -> str:
@@ -75,6 +83,30 @@ def policy_description(options: BenchOptions) -> str:
         return 'oracle: the reference program of each episode, replayed from a cassette (no model)'
     url = options.base_url or os.environ.get('CAP_LLM_BASE_URL', '') or '(CAP_LLM_BASE_URL)'
     return f'{policy_name(options)} at {url}, {options.api} API'
+
+
+@contextlib.contextmanager
+def model_endpoint(options: BenchOptions) -> Iterator[BenchOptions]:
+    """The options with the model's endpoint filled in: for backend=local, one llama.cpp server on loopback for the
+    whole run (its prompt cache stays warm across episodes), stopped at the end; otherwise the options as given."""
+    if options.policy != 'llm' or options.backend != 'local':
+        yield options
+        return
+    from cap_lmp.local_server import LocalModelClient, LocalModelServer, ServerSettings, warm_up
+    from cap_lmp_ros.domains.registry import get_domain, prompt_heads
+
+    # Graph job i runs on CPU i (see _worker): the server takes the CPUs after those, if there are any.
+    allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else []
+    spare = tuple(allowed[max(1, options.jobs):])
+    server = LocalModelServer(ServerSettings(model_file=options.model_file, threads=options.model_threads,
+                                             cpus=spare), on_event=lambda message: print(message, file=sys.stderr))
+    server.start()
+    try:
+        print(f'warm-up: {warm_up(LocalModelClient(server), prompt_heads(get_domain("tabletop")))}', file=sys.stderr)
+        yield dataclasses.replace(options, backend='http', base_url=server.base_url, model=server.model_name,
+                                  api='completions')
+    finally:
+        server.stop()
 
 
 def domain_ids(jobs: int, first: int | None = None, environ: dict[str, str] | None = None) -> list[int]:
@@ -148,14 +180,17 @@ class _EpisodeRunner:
         self.context = Context()
         rclpy.init(context=self.context)
         lmp: dict[str, Any] = {'time_limit_s': options.episode_timeout_s}
-        if options.policy == 'llm':
+        backend = 'cassette' if options.policy == 'oracle' else options.backend
+        if backend == 'local':  # lmp_node starts and supervises the model server itself
+            lmp.update(model_file=options.model_file, model_threads=options.model_threads)
+        elif options.policy == 'llm':
             lmp.update(api=options.api)
             if options.base_url:
                 lmp['base_url'] = options.base_url
             if options.model:
                 lmp['model'] = options.model
         self.graph = Graph(self.context, GraphOptions(
-            perception=options.perception, llm_backend='cassette' if options.policy == 'oracle' else 'http',
+            perception=options.perception, llm_backend=backend,
             cassette=str(cassette) if cassette else '', camera_rate=10.0 if options.perception == 'rgbd' else 0.0,
             extra={'lmp_node': lmp, 'sim_bridge': {'cameras': [DEFAULT_CAMERA]}}, cpu=cpu))
         self.node = rclpy.create_node('cap_bench', context=self.context)
@@ -168,6 +203,8 @@ class _EpisodeRunner:
         if not _wait(lambda: self.execute.server_is_ready() and self.reset.service_is_ready()
                      and self.reset_session.service_is_ready() and self.forget.service_is_ready(), 60):
             raise RuntimeError('the graph did not come up within 60 s')
+        if backend == 'local' and not self.graph.nodes['lmp_node'].model_ready.wait(MODEL_READY_TIMEOUT_S):
+            raise RuntimeError(f'the local model was not ready within {MODEL_READY_TIMEOUT_S:.0f} s')
 
     def _call(self, future, timeout: float, what: str):
         if not _wait(future.done, timeout):
@@ -191,7 +228,10 @@ class _EpisodeRunner:
                 problems.append(f'{name} {error:.3f} m off')
         return ', '.join(problems)
 
-    def run(self, episode: Episode) -> dict:
+    def run(self, episode: Episode, judge: Callable[[Episode, dict, dict], Verdict] = check,
+            instructions: Sequence[str] = ()) -> dict:
+        """Reset the scene to the episode's, send its instruction (or `instructions`, one after another in one
+        session, stopping at the first that does not finish), and judge the final state with `judge`."""
         from geometry_msgs.msg import Point
 
         from cap_interfaces.msg import ObjectSpec
@@ -211,8 +251,9 @@ class _EpisodeRunner:
         if not answer.success:
             record['reason'] = f'scene reset failed: {answer.message}'
             return record
-        self._call(self.forget.call_async(self.Trigger.Request()), 10, 'perception (forget)')
-        self._call(self.reset_session.call_async(self.Trigger.Request()), 10, 'lmp_node (reset session)')
+        self._call(self.forget.call_async(self.Trigger.Request()), SERVICE_TIMEOUT_S, 'perception (forget)')
+        self._call(self.reset_session.call_async(self.Trigger.Request()), SERVICE_TIMEOUT_S,
+                   'lmp_node (reset session)')
         tolerance = 0.005 if self.options.perception == 'ground_truth' else 0.02
         if not _wait(lambda: not self._perception_mismatch(episode, tolerance), 30):
             record['reason'] = ('perception did not report the scene as reset within 30 s: '
@@ -220,25 +261,32 @@ class _EpisodeRunner:
             return record
         initial = {s.name: s.position for s in world.object_states()}
         sim_started = world.time
-        goal = self._call(self.execute.send_goal_async(self.ExecuteCommand.Goal(command=episode.instruction)), 30,
-                          'lmp_node (goal)')
-        result_future = goal.get_result_async()
-        if not _wait(result_future.done, self.options.episode_timeout_s + 60):
-            goal.cancel_goal_async()
-            _wait(result_future.done, 30)
-            record['reason'] = f'no result within {self.options.episode_timeout_s:.0f} s'
-            return record
-        result = result_future.result().result
+        codes, calls, prompt_tokens, completion_tokens = [], 0, 0, 0
+        for instruction in instructions or (episode.instruction,):
+            goal = self._call(self.execute.send_goal_async(self.ExecuteCommand.Goal(command=instruction)), 30,
+                              'lmp_node (goal)')
+            result_future = goal.get_result_async()
+            if not _wait(result_future.done, self.options.episode_timeout_s + 60):
+                goal.cancel_goal_async()
+                _wait(result_future.done, 30)
+                record['reason'] = f'no result within {self.options.episode_timeout_s:.0f} s'
+                return record
+            result = result_future.result().result
+            codes.append(result.code)
+            calls += result.model_calls
+            prompt_tokens += result.prompt_tokens
+            completion_tokens += result.completion_tokens
+            if result.outcome != self.ExecuteCommand.Result.OUTCOME_DONE:
+                break
         settle_until = world.time + SETTLE_S
         _wait(lambda: world.time >= settle_until, 30)
         final = {s.name: s.position for s in world.object_states()}
-        verdict = check(episode, initial, final)
+        verdict = judge(episode, initial, final)
         done = result.outcome == self.ExecuteCommand.Result.OUTCOME_DONE
-        record.update(code=result.code, success=bool(done and verdict.success),
+        record.update(code='\n# ---\n'.join(codes), success=bool(done and verdict.success),
                       outcome=outcome_name(result.outcome),
                       sim_seconds=world.time - sim_started, wall_seconds=time.monotonic() - wall_started,
-                      model_calls=result.model_calls, prompt_tokens=result.prompt_tokens,
-                      completion_tokens=result.completion_tokens,
+                      model_calls=calls, prompt_tokens=prompt_tokens, completion_tokens=completion_tokens,
                       final_state={k: [round(float(v), 4) for v in p] for k, p in final.items()})
         if not done:
             record['reason'] = f'{_outcome_reason(result.outcome)}: {result.message}'
@@ -394,11 +442,28 @@ def build_parser() -> argparse.ArgumentParser:
                              'set, else consecutive ids from a start derived from the process id')
     parser.add_argument('--out', default='output/bench', help='output folder [output/bench]')
     parser.add_argument('--resume', action='store_true', help='keep the episodes already in --out')
-    parser.add_argument('--base-url', default='', help='for --policy llm; default CAP_LLM_BASE_URL')
-    parser.add_argument('--model', default='', help='for --policy llm; default CAP_LLM_MODEL')
-    parser.add_argument('--api', choices=('chat', 'completions'), default='chat')
+    add_model_arguments(parser, default_api='chat')
     parser.add_argument('--episode-timeout', type=float, default=900.0, help='per episode [s]')
     return parser
+
+
+def add_model_arguments(parser: argparse.ArgumentParser, default_api: str) -> None:
+    """The options that choose the model of --policy llm (read back with model_settings)."""
+    parser.add_argument('--backend', choices=('http', 'local'), default='http',
+                        help='for --policy llm: http (--base-url) or local (the llama.cpp server and model of `make '
+                             'model`, started for the run; completions API) [http]')
+    parser.add_argument('--base-url', default='', help='for --backend http; default CAP_LLM_BASE_URL')
+    parser.add_argument('--model', default='', help='for --backend http; default CAP_LLM_MODEL')
+    parser.add_argument('--api', choices=('chat', 'completions'), default=default_api,
+                        help=f'for --backend http: the endpoint protocol [{default_api}]')
+    parser.add_argument('--model-file', default='', help='with --backend local: a GGUF file [the default model]')
+    parser.add_argument('--model-threads', type=int, default=1, help='with --backend local: server threads [1]')
+
+
+def model_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """BenchOptions fields from the options of add_model_arguments."""
+    return {'backend': args.backend, 'base_url': args.base_url, 'model': args.model, 'api': args.api,
+            'model_file': args.model_file, 'model_threads': args.model_threads}
 
 
 class Interrupted(BaseException):
@@ -424,8 +489,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     options = BenchOptions(policy=args.policy, groups=groups, tasks=tasks, trials=args.trials,
                            perception=args.perception, base_seed=args.seed, jobs=args.jobs, out=args.out,
-                           resume=args.resume, base_url=args.base_url, model=args.model, api=args.api,
-                           episode_timeout_s=args.episode_timeout)
+                           resume=args.resume, episode_timeout_s=args.episode_timeout, **model_settings(args))
     try:
         domain_ids(options.jobs)
     except ValueError as error:
@@ -434,12 +498,16 @@ def main(argv: list[str] | None = None) -> int:
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, _raise_interrupted)
     try:
-        summary = run_benchmark(options)
+        with model_endpoint(options) as options:
+            summary = run_benchmark(options)
     except Interrupted as interrupted:
         done = len(load_records(pathlib.Path(args.out)))
         print(f'interrupted ({interrupted}): {done} episode(s) are in {args.out}; continue with --resume',
               file=sys.stderr)
         return interrupted.exit_code
+    except LLMError as error:  # the local model could not start: one line saying why and what to do
+        print(f'error: {one_line(str(error))}', file=sys.stderr)
+        return 2
     # The report quotes the programs' messages: never a raw control character on the terminal.
     report = (pathlib.Path(args.out) / 'report.md').read_text(encoding='utf-8')
     print(terminal_text(report, limit=len(report)))

@@ -290,8 +290,20 @@ def snapshot(cameras: Sequence[str], out_dir: pathlib.Path, server_timeout: floa
         session.close()
 
 
+def choose_backend(backend: str, model_file: str = '', cassette: str = '') -> str:
+    """'auto': the cassette when one is named, else the local model when `make model` installed it (or --model-file
+    names one), else the packaged cassette."""
+    if backend != 'auto':
+        return backend
+    if cassette:
+        return 'cassette'
+    from cap_lmp.local_server import local_model_installed
+    return 'local' if local_model_installed(model_file) else 'cassette'
+
+
 def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, cassette: str,
-       record: bool, namespace: str = '', domain: str = 'tabletop', cpu: int = 0) -> int:
+       record: bool, namespace: str = '', domain: str = 'tabletop', cpu: int = 0, model_file: str = '',
+       model_threads: int = 1) -> int:
     """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM.
 
     Exits 0 when stopped by a signal, FATAL_EXIT_CODE (70) when a thread the graph depends on died (the graph no
@@ -310,12 +322,19 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     graph = None
+    backend = choose_backend(backend, model_file, cassette)
+    lmp: dict[str, Any] = {}
+    if backend == 'local':
+        lmp = {'model_file': model_file, 'model_threads': model_threads}
+        _say('language model: the local model server (loading; /cap/status says "model ready" when it is)')
+    elif backend == 'cassette':
+        _say('language model: the replay cassette (its recorded commands only; `make model` installs a local model)')
     try:
         try:
             graph = Graph(context, GraphOptions(seed=seed, objects=objects, real_time=real_time,
                                                 perception=perception, llm_backend=backend, cassette=cassette,
                                                 record_cassette=record, namespace=namespace, domain=domain,
-                                                cpu=cpu))
+                                                cpu=cpu, extra={'lmp_node': lmp} if lmp else {}))
         except (ValueError, CapLLMError) as error:  # a configuration the user can fix: say what, in one line
             _error(f'error: {one_line(str(error))}')
             return EXIT_UNREACHABLE
@@ -384,8 +403,14 @@ def build_parser() -> argparse.ArgumentParser:
     p_up.add_argument('--objects', default='', help='comma-separated objects, e.g. "red block, blue bowl"')
     p_up.add_argument('--real-time', action='store_true', help='simulate in real time (default: as fast as possible)')
     p_up.add_argument('--perception', choices=('ground_truth', 'rgbd'), default='ground_truth')
-    p_up.add_argument('--backend', choices=('cassette', 'http'), default='cassette',
-                      help='cassette (offline replay) or http (CAP_LLM_BASE_URL, CAP_LLM_MODEL, CAP_LLM_API_KEY)')
+    p_up.add_argument('--backend', choices=('auto', 'local', 'cassette', 'http'), default='auto',
+                      help='local (the llama.cpp server and model of `make model`), cassette (offline replay), '
+                           'http (CAP_LLM_BASE_URL, CAP_LLM_MODEL, CAP_LLM_API_KEY); auto: local when installed, '
+                           'else cassette [auto]')
+    p_up.add_argument('--model-file', default='', help='with --backend local: a GGUF model file [the default '
+                      'model of `make model`]')
+    p_up.add_argument('--model-threads', type=int, default=1, help='with --backend local: threads of the model '
+                      'server [1]')
     p_up.add_argument('--cassette', default='', help='cassette file (default: the packaged reference cassette)')
     p_up.add_argument('--record', action='store_true', help='with --backend http: record answers into --cassette')
     p_up.add_argument('--cpu', type=int, default=0, help='pin the graph to this one of the allowed CPUs [0]; give '
@@ -433,7 +458,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     _signals()  # from here on SIGINT / SIGTERM end the command cleanly (rclpy's imports take a while)
     if args.command == 'up':
         return up(args.seed, args.objects, args.real_time, args.perception, args.backend, args.cassette, args.record,
-                  args.namespace, args.domain, args.cpu)
+                  args.namespace, args.domain, args.cpu, args.model_file, args.model_threads)
     if args.command == 'send':
         return send(args.text, args.wait, args.timeout, namespace=args.namespace)
     if args.command == 'stop':

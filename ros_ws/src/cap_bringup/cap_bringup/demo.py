@@ -25,6 +25,7 @@ from typing import Callable
 import numpy as np
 
 from cap_lmp.safe_text import terminal_text
+from cap_lmp.local_server import MODEL_READY_TIMEOUT_S
 from cap_tabletop.workspace import CORNERS
 
 DEMO_CASSETTE = pathlib.Path(__file__).resolve().parent / 'cassettes' / 'tabletop_demo.yaml'
@@ -195,6 +196,9 @@ def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '
     started = time.monotonic()
     try:
         _wait(lambda: execute.server_is_ready() and reset.service_is_ready(), 30, 'the graph to come up')
+        if backend == 'local':  # the model loads and reads its prompts first (minutes on one core, once)
+            log('waiting for the local model to load and read its prompts ...')
+            _wait(graph.nodes['lmp_node'].model_ready.is_set, MODEL_READY_TIMEOUT_S, 'the local model')
         request = ResetScene.Request(seed=0, objects=[
             ObjectSpec(name=name, category=name.split()[1], color_name=name.split()[0], use_position=True,
                        position=Point(x=xy[0], y=xy[1])) for name, xy in SCENE.items()])
@@ -274,9 +278,10 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='cap-demo', description=__doc__.split('\n\n')[0])
     parser.add_argument('--out', type=pathlib.Path,
                         default=pathlib.Path('output') / time.strftime('demo-%Y%m%d-%H%M%S'))
-    parser.add_argument('--backend', choices=('cassette', 'http'),
+    parser.add_argument('--backend', choices=('cassette', 'http', 'local'),
                         default='http' if os.environ.get('CAP_LLM_BASE_URL') else 'cassette',
-                        help='cassette (default) or http (default when CAP_LLM_BASE_URL is set)')
+                        help='cassette (default), http (default when CAP_LLM_BASE_URL is set) or local (the '
+                             'llama.cpp server and model of `make model`)')
     parser.add_argument('--cassette', default='', help='cassette to replay, or to record into with --record')
     parser.add_argument('--record', action='store_true', help='with --backend http: record the answers')
     parser.add_argument('--perception', choices=('ground_truth', 'rgbd'), default='ground_truth')

@@ -26,7 +26,8 @@ ARGUMENTS = (
     ('seed', 'scene seed'),
     ('objects', 'comma-separated objects, e.g. "red block, blue bowl" (empty: the seed\'s default episode)'),
     ('perception', 'ground_truth or rgbd'),
-    ('llm_backend', 'cassette (offline) or http (CAP_LLM_BASE_URL, CAP_LLM_MODEL from the environment)'),
+    ('llm_backend', 'cassette (offline), http (CAP_LLM_BASE_URL, CAP_LLM_MODEL from the environment) or local (the '
+                    'llama.cpp server and model of `make model`, started by lmp_node)'),
     ('domain', 'the domain whose prompts, robot API and scene run (cap_lmp_ros.domains)'),
 )
 

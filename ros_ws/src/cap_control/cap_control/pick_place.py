@@ -216,6 +216,8 @@ class PickPlaceConfig:
     # leaning on it, tilted.
     target_room: float = parameter(0.0, 'Room kept between a point target and the footprints of the other blocks '
                                    '[m] (0: not overlapping them).')
+    stack_radius: float = parameter(0.015, 'A point target this close to a block\'s centre means that block: the '
+                                    'object is stacked on it (a program that places "at get_obj_pos(block)") [m].')
     resting_tolerance: float = parameter(0.015, 'Placed at a point, the object must rest on the table: its centre '
                                          'at most this much above half its height [m].')
     allowed_sag: float = parameter(0.03, 'Largest sag of a joint-space move below its endpoints\' height before a '
@@ -676,8 +678,15 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     # All of the placed object must be over the table (on a block or in a bowl near the edge too): an
     # overhanging one topples off, or the fingers push it off.
     check_place_on_table(obj, place_xy, config, support.name if support is not None else None)
+    taken = target_taken_by(obj, place_xy, neighbours, config) if support is None else None
+    if taken is not None and math.dist(place_xy, taken.position[:2]) <= config.stack_radius:
+        # The point is the block's own position: stack on it, as if it had been named (and check that again).
+        support = target_object = taken
+        place_xy = target_xy = (float(taken.position[0]), float(taken.position[1]))
+        target_description = f'the {taken.name}'
+        check_place_on_table(obj, place_xy, config, taken.name)
+        taken = None
     if support is None:
-        taken = target_taken_by(obj, place_xy, neighbours, config)
         if taken is not None:
             raise PickPlaceError(
                 PickPlaceErrorCode.OUTSIDE_WORKSPACE,

@@ -242,6 +242,16 @@ def test_a_point_target_on_another_block_is_refused_naming_it_and_one_in_a_bowl_
     assert target_taken_by(red, (0.11, -0.6), [blue, orange], config) is None  # into the bowl
 
 
+def test_a_point_target_at_a_blocks_own_position_stacks_on_that_block():
+    red, orange = block('red block', 0.0, -0.4), block('orange block', 0.0, -0.55)
+    at_orange = plan_pick_place(red, (0.005, -0.545), HOME_JOINTS, neighbours=[orange])  # get_obj_pos('orange block')
+    named = plan_pick_place(red, orange, HOME_JOINTS, neighbours=[orange])
+    assert at_orange.target_description == 'the orange block'
+    assert at_orange.place_z == pytest.approx(named.place_z) and at_orange.target_xy == named.target_xy
+    (on_block,) = stage(at_orange, StageName.RETREAT).checks
+    assert on_block.failure(Observation(object_position=(0.0, -0.55, 0.06))) is None
+
+
 def test_after_placing_at_a_point_the_block_must_rest_on_the_table_there():
     plan = plan_pick_place(block('red block', 0.0, -0.5), (0.1, -0.3), HOME_JOINTS)
     (placed,) = stage(plan, StageName.RETREAT).checks

@@ -80,6 +80,9 @@ class LMPConfig:
     # imports become provided names); it may raise to refuse a program. None for every robot LMP.
     prepare_source: Callable[[str], str] | None = None
     generate_functions: bool = True  # False: a call of an undefined function is an error in this LMP's code
+    # Of the function-generation LMP: how a missing function is asked for, 'call' (as the program called it, the
+    # paper's queries) or 'parameters' (parameter names in place of the call's values; see functions.UndefinedCall).
+    signature_style: str = 'call'
 
 
 @dataclass(frozen=True)
@@ -153,6 +156,18 @@ def _return_freed_memory() -> None:
         ctypes.CDLL(None).malloc_trim(0)  # the process' own symbols: no file to open, no helper to run
     except (OSError, AttributeError):
         pass  # not glibc: resident memory shrinks later, or not at all
+
+
+def last_assigned_name(source: str) -> str | None:
+    """The variable the program's last statement assigns (`x = ...`), or None."""
+    try:
+        body = ast.parse(source).body
+    except SyntaxError:
+        return None
+    if body and isinstance(body[-1], ast.Assign) and len(body[-1].targets) == 1 \
+            and isinstance(body[-1].targets[0], ast.Name):
+        return body[-1].targets[0].id
+    return None
 
 
 def literal_assignment(line: str) -> tuple[str, Any] | None:
@@ -349,9 +364,10 @@ class Engine:
             if len(self._stats.generated) >= self.max_generated_functions:
                 raise GenerationError(f'the code needed more than {self.max_generated_functions} new functions; '
                                       'giving up')
-            self._emit(GENERATING, self.fgen_lmp, message=f'define function: {missing.signature}')
             fgen = self.lmps[self.fgen_lmp]
-            source = self._ask(fgen, f'define function: {missing.signature}', '')
+            query = f'define function: {missing.query_signature(fgen.signature_style)}'
+            self._emit(GENERATING, self.fgen_lmp, message=query)
+            source = self._ask(fgen, query, '')
             self._stats.generated.append(missing.name)
             source = self._source(fgen, source, known)
             try:
@@ -396,9 +412,13 @@ class Engine:
             entry = '\n'.join(part for part in (context, use_query, prepared.main.source.rstrip()) if part)
             self.histories[config.name].append(entry)
         if config.has_return:
-            if config.return_val_name not in scope:
-                raise GenerationError(f'the {config.name} program did not set {config.return_val_name}')
-            return scope[config.return_val_name]
+            if config.return_val_name in scope:
+                return scope[config.return_val_name]
+            # Small models often end with `block_names = [...]` instead of `ret_val = ...`: that value is meant.
+            last = last_assigned_name(prepared.main.source)
+            if last is not None and last in scope:
+                return scope[last]
+            raise GenerationError(f'the {config.name} program did not set {config.return_val_name}')
         return None
 
     def call_lmp(self, lmp: str, query: str, context: str = '', **variables: Any) -> Any:

@@ -11,7 +11,56 @@ class UndefinedCall:
     """A call of a name nothing defines, with the signature the function-generation LMP is asked for."""
 
     name: str
-    signature: str  # e.g. 'pts = get_square_corners(center, size)' or 'say_hello()'
+    signature: str  # the call as written, e.g. 'pts = get_square_corners(get_obj_pos("red bowl"), size=0.1)'
+    parameters: str = ''  # the call with parameter names, e.g. 'pts = get_square_corners(obj_pos, size)'
+
+    def query_signature(self, style: str) -> str:
+        """'call': the call as the program wrote it (the paper's queries); 'parameters': with parameter names, so
+        that a small model does not copy the call's values into its `def` line."""
+        return self.parameters if style == 'parameters' and self.parameters else self.signature
+
+
+_GETTER_PREFIXES = ('get_', 'parse_', 'compute_', 'find_')
+
+
+def parameter_name(argument: ast.expr) -> str:
+    """A parameter name for a positional argument: the variable's name, the attribute, what a getter returns
+    (`get_obj_pos(...)` -> obj_pos), `len(x)` -> n; '' when the argument suggests none."""
+    if isinstance(argument, ast.Name):
+        return argument.id
+    if isinstance(argument, ast.Attribute):
+        return argument.attr
+    if isinstance(argument, ast.Subscript):
+        return parameter_name(argument.value)
+    if isinstance(argument, ast.Call) and isinstance(argument.func, ast.Name):
+        name = argument.func.id
+        if name == 'len':
+            return 'n'
+        for prefix in _GETTER_PREFIXES:
+            if name.startswith(prefix) and len(name) > len(prefix):
+                return name[len(prefix):]
+    if isinstance(argument, ast.Constant) and isinstance(argument.value, str):
+        return 'name'
+    return ''
+
+
+def parameter_signature(call: ast.Call) -> str:
+    """The call with a parameter name in place of each argument: `f(get_obj_pos('a'), 2, r=0.1)` -> `f(obj_pos,
+    x2, r)`. Names repeat-free; keyword arguments keep their keyword; `*xs` and `**kw` stay starred."""
+    names: list[str] = []
+    for index, argument in enumerate(call.args, start=1):
+        if isinstance(argument, ast.Starred):
+            names.append('*' + (parameter_name(argument.value) or 'args'))
+            continue
+        names.append(parameter_name(argument) or f'x{index}')
+    names += [keyword.arg if keyword.arg else '**kwargs' for keyword in call.keywords]
+    seen: dict[str, int] = {}
+    unique = []
+    for name in names:
+        count = seen.get(name, 0)
+        seen[name] = count + 1
+        unique.append(name if count == 0 else f'{name}{count + 1}')
+    return f'{ast.unparse(call.func)}({", ".join(unique)})'
 
 
 def top_level_functions(tree: ast.Module) -> list[str]:
@@ -59,7 +108,6 @@ def undefined_calls(tree: ast.AST, known: AbstractSet[str]) -> list[UndefinedCal
         if name in known or name in local or name in missing:
             continue
         target = assigned_calls.get(id(call))
-        call_text = ast.unparse(call)
-        signature = f'{ast.unparse(target)} = {call_text}' if target is not None else call_text
-        missing[name] = UndefinedCall(name, signature)
+        assigned = f'{ast.unparse(target)} = ' if target is not None else ''
+        missing[name] = UndefinedCall(name, assigned + ast.unparse(call), assigned + parameter_signature(call))
     return list(missing.values())

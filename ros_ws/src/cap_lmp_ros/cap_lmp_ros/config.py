@@ -9,9 +9,10 @@ from cap_ros_common.parameters import parameter
 
 @dataclass(frozen=True)
 class LmpNodeConfig:
-    llm_backend: str = parameter('cassette', 'cassette (replay a recorded cassette, offline) or http (an '
+    llm_backend: str = parameter('cassette', 'cassette (replay a recorded cassette, offline), http (an '
                                  'OpenAI-compatible endpoint; CAP_LLM_BASE_URL, CAP_LLM_MODEL, CAP_LLM_API_KEY from '
-                                 'the environment unless set below).')
+                                 'the environment unless set below) or local (a llama.cpp server this node starts '
+                                 'and supervises, see model_file; installed by `make model`).')
     cassette: str = parameter('', 'Cassette file for llm_backend=cassette, or the file to record into with '
                               "record_cassette=true; empty: the domain's packaged reference cassette.")
     record_cassette: bool = parameter(False, 'With llm_backend=http: also record every answer into `cassette`.')
@@ -36,6 +37,12 @@ class LmpNodeConfig:
                           'sockets, exec or new processes): required (the node does not start without it), '
                           'best_effort (what the kernel offers, the rest logged) or off.')
     model_time_limit_s: float = parameter(120.0, 'Overall model time per command [s].')
+    model_file: str = parameter('', 'With llm_backend=local: the GGUF model file; empty: CAP_MODEL_FILE, else the '
+                                'default model `make model` installs.')
+    model_threads: int = parameter(1, 'With llm_backend=local: CPU threads of the model server (1 keeps a core for '
+                                   'the simulator on a 2-core machine).')
+    model_context: int = parameter(8192, 'With llm_backend=local: context size of the model server [tokens].')
+    model_port: int = parameter(0, 'With llm_backend=local: loopback port of the model server; 0: a free one.')
 
 
 # Parameters whose change at run time takes effect from the next command; any other change is rejected.

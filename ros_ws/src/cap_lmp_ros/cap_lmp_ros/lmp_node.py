@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 from typing import Any
 
 import rclpy
@@ -41,14 +42,17 @@ from cap_lmp import engine as engine_module
 from cap_lmp.cassette import make_client
 from cap_lmp.engine_protocol import CommandEngine
 from cap_lmp.isolated_engine import JAIL_MODES, IsolatedEngine
+from cap_lmp.errors import LLMError
 from cap_lmp.llm import NO_MODEL_CONFIGURED
+from cap_lmp.local_model import INSTALL_HINT
+from cap_lmp.local_server import LocalModelClient, LocalModelServer, ServerSettings, server_binary, warm_up
 from cap_lmp.outcome import Outcome
 from cap_lmp.safe_text import terminal_text, wire_text
 from cap_lmp.sandbox import SandboxLimits
 from cap_lmp.wire import MAX_CODE_CHARS
 from cap_lmp_ros.command_queue import CommandQueue, Job
 from cap_lmp_ros.config import RUNTIME_PARAMETERS, LmpNodeConfig
-from cap_lmp_ros.domains.registry import engine_api, get_domain
+from cap_lmp_ros.domains.registry import engine_api, get_domain, prompt_heads
 from cap_lmp_ros.thread_watch import FATAL_EXIT_CODE, ThreadWatch
 from cap_ros_common.parameters import declare_config, parameter_names
 
@@ -109,8 +113,19 @@ class LmpNode(Node):
                 raise ValueError(NO_MODEL_CONFIGURED)
             client_options = {'cassette': cassette if config.record_cassette else None,
                               'record': config.record_cassette, **http_options}
-        else:
-            raise ValueError(f'parameter llm_backend={config.llm_backend!r} is not one of cassette, http')
+        elif config.llm_backend != 'local':
+            raise ValueError(f'parameter llm_backend={config.llm_backend!r} is not one of cassette, http, local')
+        self.model_server: LocalModelServer | None = None
+        if config.llm_backend == 'local':
+            settings = ServerSettings(model_file=config.model_file, threads=config.model_threads,
+                                      context_size=config.model_context, port=config.model_port)
+            if not settings.model_path().is_file():  # one line at once, not a failure at the first command
+                raise ValueError(f'no model file at {settings.model_path()}: {INSTALL_HINT}')
+            try:
+                server_binary()
+            except LLMError as error:
+                raise ValueError(str(error)) from None
+            self.model_server = LocalModelServer(settings, on_event=self._on_model_event, on_ready=self._warm_up)
         api = config.api or os.environ.get('CAP_LLM_API', 'chat')
         if api not in ('chat', 'completions'):
             source = 'parameter api' if config.api else 'CAP_LLM_API'
@@ -123,14 +138,19 @@ class LmpNode(Node):
         api = engine_api(self.domain, self.robot.functions())
         limits = SandboxLimits(time_limit_s=config.time_limit_s)
         self.engine: CommandEngine
+        self.model_ready = threading.Event()  # with llm_backend=local: set once the model has read the prompts
+        self.model_ready_generation = 0  # the server start whose warm-up finished last
+        local_client = (LocalModelClient(self.model_server, api=config.api or 'completions', gate=self.model_ready)
+                        if self.model_server else None)
+        client = local_client or make_client(**client_options)
         if config.sandbox_process:
-            isolated = IsolatedEngine(self.domain.build_engine, api, make_client(**client_options), limits,
+            isolated = IsolatedEngine(self.domain.build_engine, api, client, limits,
                                       stall_limit_s=config.stall_limit_s,
                                       model_time_limit_s=config.model_time_limit_s, jail=config.jail)
             where = f'sandbox process {isolated.pid}'
             self.engine = isolated
         else:
-            self.engine = self.domain.build_engine(api, make_client(**client_options), limits,
+            self.engine = self.domain.build_engine(api, client, limits,
                                                    model_time_limit_s=config.model_time_limit_s)
             where = 'in-process sandbox'
         self.engine.add_listener(self._on_engine_event)
@@ -155,8 +175,47 @@ class LmpNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.thread_watch.add_callback(self._refuse_waiting)
         self._worker = self.thread_watch.start(self._work, 'lmp_worker')
+        if self.model_server is not None:
+            # Loading the model and reading the prompt's long prefix take seconds: on a thread of their own, so
+            # the node answers at once; commands wait for the model (LocalModelClient.complete).
+            self.thread_watch.start(self._start_model, 'model_start')
         self.get_logger().info(f'ready: domain {self.domain.name}, LLM backend {config.llm_backend}'
                                + (f' ({cassette})' if config.llm_backend == 'cassette' else '') + f', {where}')
+
+    def _start_model(self) -> None:
+        assert self.model_server is not None
+        try:
+            self.model_server.start()
+        except LLMError as error:
+            self._on_model_event(f'local model unavailable: {error}')
+            self.model_ready.set()  # commands now get the server's error instead of waiting
+
+    def _warm_up(self, generation: int) -> None:
+        """Each time the server has (re)loaded its model: read the domain's prompts into its cache, then let
+        commands through (they wait meanwhile: a cold prompt would cost each of them tens of seconds)."""
+        assert self.model_server is not None
+        self.model_ready.clear()
+        try:
+            warm = warm_up(LocalModelClient(self.model_server, api='completions'), prompt_heads(self.domain))
+            self._on_model_event(f'model ready: {self.model_server.model_name} at {self.model_server.base_url} '
+                                 f'(server start {generation}; {warm})')
+            self.model_ready_generation = generation
+        except LLMError as error:
+            self._on_model_event(f'the local model did not read its prompts: {error}')
+        finally:
+            self.model_ready.set()
+
+    def _on_model_event(self, message: str) -> None:
+        """The local model's state on /cap/status (command_id empty, stage STAGE_MODEL) and in the log."""
+        if self._closing:
+            return
+        try:
+            self.get_logger().info(terminal_text(message))
+            status = StatusEvent(stage=StatusEvent.STAGE_MODEL, message=wire_text(message))
+            status.header.stamp = self.get_clock().now().to_msg()
+            self._status_publisher.publish(status)
+        except Exception:  # the node is shutting down: nothing to tell
+            pass
 
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
         """Apply the few parameters that can change between commands; reject any other change, saying why."""
@@ -269,6 +328,9 @@ class LmpNode(Node):
                 return
             self._current = job
             self.robot.stop_requested.clear()
+            begin_command = getattr(self.robot, 'begin_command', None)  # optional (see RobotBinding)
+            if begin_command is not None:
+                begin_command()
             try:
                 job.result = self.engine.run(job.command)
                 job.outcome = self._outcome(job)
@@ -356,6 +418,8 @@ class LmpNode(Node):
         self.queue.close()
         self._stop_running()
         self.engine.close()
+        if self.model_server is not None:
+            self.model_server.stop()
         super().destroy_node()
 
 

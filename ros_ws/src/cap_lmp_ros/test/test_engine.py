@@ -65,8 +65,9 @@ def test_three_levels_of_generated_functions(server, table):
     assert result.generated_functions == ['get_row_pts', 'offset_pt', 'spread', 'centered_offset']
     for name in result.generated_functions:
         assert f'def {name}(' in result.code
-    assert fgen_requests(server)[0] == '# define function: row_pts = get_row_pts(parse_position(\'top side\'), ' \
-                                       'len(block_names)).'
+    # asked with parameter names, not the call's values (a small model copies values into its `def` line)
+    assert fgen_requests(server)[0] == '# define function: row_pts = get_row_pts(position, n).'
+    assert fgen_requests(server)[1] == '# define function: offset_pt(center, dx).'
 
     # the functions stay for later commands: no new definitions are asked for
     server.answers['now spread them again'] = (
@@ -121,6 +122,23 @@ def test_generated_code_calls_another_lmp(server, table):
     assert [(e.stage, e.lmp) for e in events] == [
         (GENERATING, 'tabletop_ui'), (CODE, 'tabletop_ui'), (EXECUTING, 'tabletop_ui'),
         (GENERATING, 'parse_obj_name'), (CODE, 'parse_obj_name'), (DONE, 'tabletop_ui')]
+
+
+def test_a_nested_lmp_that_forgets_ret_val_returns_its_last_assignment(server, table):
+    server.answers.update({
+        'put the blocks in the blue bowl': (
+            "block_names = parse_obj_name('the blocks', f'objects = {get_obj_names()}')\n"
+            "for name in block_names:\n    put_first_on_second(name, 'blue bowl')"),
+        '# the blocks.': "block_names = [name for name in objects if 'block' in name]",  # no ret_val
+        'say the bowls': "say(parse_obj_name('the bowls', f'objects = {get_obj_names()}'))",
+        '# the bowls.': "print('thinking')",  # nothing assigned at the end: still an error
+    })
+    engine = make_engine(server, table)
+    result = engine.run('put the blocks in the blue bowl')
+    assert result.success, result.message
+    assert np.allclose(table.get_obj_pos('green block'), SCENE['blue bowl'])
+    failed = engine.run('say the bowls')
+    assert not failed.success and 'the parse_obj_name program did not set ret_val' in failed.message
 
 
 def test_a_syntax_error_from_the_model_is_reported_cleanly(server, table):

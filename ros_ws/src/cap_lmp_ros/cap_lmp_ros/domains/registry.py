@@ -36,6 +36,7 @@ class RobotBinding(Protocol):
         """Stop waiting for the robot and cancel the motion in progress (thread-safe)."""
         ...
 
+    # Optional: `begin_command()`, called before each command (the table top remembers what the last one moved).
     # Optional: `bind_clients(node)` moves the binding's service and action clients onto another node; the
     # one-process graph calls it, when the binding has it, to keep those clients on its fast executor.
 
@@ -129,6 +130,12 @@ def engine_api(domain: Domain, functions: Mapping[str, Callable[..., Any]]) -> d
     return {name: functions[name] for name in domain.robot_functions}
 
 
+def prompt_heads(domain: Domain) -> list[tuple[str, str]]:
+    """(LMP name, the start every prompt of that LMP shares) for each LMP of the domain: what a model server's
+    prompt cache can hold before the first command. Built in this process, with inert robot functions."""
+    inert = {name: (lambda *args, **kwargs: None) for name in domain.robot_functions}
+    engine = domain.build_engine(inert, None)
+    return [(name, config.prompt.rstrip('\n') + '\n') for name, config in engine.lmps.items()]
 
 
 def unregister_domain(name: str) -> None:

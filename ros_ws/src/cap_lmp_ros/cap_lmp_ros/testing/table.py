@@ -44,6 +44,8 @@ class Table:
     objects: dict[str, TableObject] = field(default_factory=dict)
     said: list[str] = field(default_factory=list)
     moves: list[tuple[str, Any]] = field(default_factory=list)
+    moved_from: dict[str, np.ndarray] = field(default_factory=dict)  # this command's, as RosTabletopApi keeps them
+    last_moved_from: dict[str, np.ndarray] = field(default_factory=dict)
 
     @classmethod
     def with_objects(cls, positions: Mapping[str, Sequence[float]]) -> 'Table':
@@ -72,8 +74,16 @@ class Table:
     def is_obj_visible(self, name: str) -> bool:
         return name in self.objects
 
+    def begin_command(self) -> None:
+        if self.moved_from:
+            self.last_moved_from, self.moved_from = self.moved_from, {}
+
+    def get_pos_before_last_command(self, name: str) -> np.ndarray:
+        return self.last_moved_from.get(name, self._get(name).xy).copy()
+
     def put_first_on_second(self, obj_name: str, target: Any) -> None:
         obj = self._get(obj_name)
+        self.moved_from.setdefault(obj_name, obj.xy.copy())
         if obj.kind != 'block':
             raise ValueError(f'the robot can only pick up blocks, not the {obj_name}')
         if isinstance(target, str):
@@ -97,5 +107,6 @@ class Table:
         return {'get_obj_names': self.get_obj_names, 'get_obj_pos': self.get_obj_pos, 'get_bbox': self.get_bbox,
                 'get_color': self.get_color, 'is_obj_visible': self.is_obj_visible,
                 'put_first_on_second': self.put_first_on_second, 'say': self.say,
+                'get_pos_before_last_command': self.get_pos_before_last_command,
                 'denormalize_xy': denormalize_xy, 'get_corner_name': get_corner_name,
                 'get_side_name': get_side_name}

@@ -11,7 +11,7 @@ from cap_lmp_ros.domains.tabletop.lmps import build_engine
 
 # The names RosTabletopApi binds over ROS; the pure helpers (denormalize_xy, ...) are added by build_engine.
 ROBOT_FUNCTIONS = ('get_obj_names', 'get_obj_pos', 'get_bbox', 'get_color', 'is_obj_visible', 'put_first_on_second',
-                   'say')
+                   'say', 'get_pos_before_last_command')
 
 
 def robot_api(node: Any, say_publisher: Any, service_timeout_s: float, motion_timeout_s: float) -> RobotBinding:

@@ -44,6 +44,19 @@ def get_side_name(pos: Sequence[float]) -> str:
     return _closest(pos, SIDES)
 
 
+def object_name_candidate(name: Any) -> str | None:
+    """What a program most likely meant as one object's name: the text itself, the one name of a one-item list
+    (`parse_obj_name` answers lists), without a leading "the", case and spaces folded; None if it is not a name."""
+    if isinstance(name, (list, tuple)) and len(name) == 1:
+        name = name[0]
+    if not isinstance(name, str):
+        return None
+    words = name.strip().lower().split()
+    if words[:1] == ['the']:
+        words = words[1:]
+    return ' '.join(words)
+
+
 def tabletop_lmp_configs() -> list[LMPConfig]:
     """The six LMPs of the table-top domain, prompts loaded from prompts/ beside this module."""
     parse_stop = ('#', 'objects = [')
@@ -58,7 +71,9 @@ def tabletop_lmp_configs() -> list[LMPConfig]:
                   callable_from_code=True),
         LMPConfig('transform_shape_pts', load_prompt(PROMPTS_DIR, 'transform_shape_pts'), stop=('#',), has_return=True,
                   return_val_name='new_shape_pts', callable_from_code=True),
-        LMPConfig('fgen', load_prompt(PROMPTS_DIR, 'fgen'), stop=('# define', '# example'), max_tokens=1024),
+        # Parameter names, not the call's values, in the query: a small model copies values into its `def` line.
+        LMPConfig('fgen', load_prompt(PROMPTS_DIR, 'fgen'), stop=('# define', '# example'), max_tokens=1024,
+                  signature_style='parameters'),
     ]
 
 
@@ -73,5 +88,5 @@ def build_engine(api: Mapping[str, Callable[..., Any]], client: LLMClient, limit
 
 
 __all__ = ['CORNERS', 'MIDDLE', 'NORMALISED_ORIGIN', 'NORMALISED_SPAN', 'PROMPTS_DIR', 'SIDES',
-           'build_engine', 'denormalize_xy', 'get_corner_name', 'get_side_name',
+           'build_engine', 'denormalize_xy', 'get_corner_name', 'get_side_name', 'object_name_candidate',
            'tabletop_lmp_configs']

@@ -25,6 +25,7 @@ from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 from cap_lmp.errors import RobotApiError, StoppedError
 from cap_lmp.safe_text import wire_text
+from cap_lmp_ros.domains.tabletop.lmps import object_name_candidate
 
 
 MAX_SAY_CHARS = 2000
@@ -50,6 +51,11 @@ class RosTabletopApi:
         self._active_goal = None
         self._goal_lock = threading.Lock()
         self.said: list[str] = []
+        self._known_names: set[str] = set()  # names perception has listed: passed on without asking again
+        # Where the objects moved by this command, and by the last command that moved any, were before it moved
+        # them: what "undo that" needs (get_pos_before_last_command).
+        self._moved_from: dict[str, np.ndarray] = {}
+        self._last_moved_from: dict[str, np.ndarray] = {}
         self.api_calls = 0
         self.api_call_seconds: list[float] = []
 
@@ -80,7 +86,20 @@ class RosTabletopApi:
         """The names generated code sees."""
         return {'get_obj_names': self.get_obj_names, 'get_obj_pos': self.get_obj_pos, 'get_bbox': self.get_bbox,
                 'get_color': self.get_color, 'is_obj_visible': self.is_obj_visible,
-                'put_first_on_second': self.put_first_on_second, 'say': self.say}
+                'put_first_on_second': self.put_first_on_second, 'say': self.say,
+                'get_pos_before_last_command': self.get_pos_before_last_command}
+
+    def begin_command(self) -> None:
+        """A new command starts: the moves of the one before become "the last command's" (if it moved anything)."""
+        if self._moved_from:
+            self._last_moved_from, self._moved_from = self._moved_from, {}
+
+    def get_pos_before_last_command(self, name: str) -> np.ndarray:
+        """Where the object was before the last command that moved objects (where it is, if that one left it)."""
+        name = self._name(name)
+        if name in self._last_moved_from:
+            return self._last_moved_from[name].copy()
+        return self.get_obj_pos(name)
 
     def stop(self) -> None:
         """Stop waiting for the robot and cancel the motion in progress (thread-safe)."""
@@ -95,9 +114,24 @@ class RosTabletopApi:
         """Names of the objects perception knows, e.g. ['blue block', 'red bowl']."""
         return list(self._call(self._names, GetObjectNames.Request(), 'the perception service').names)
 
-    def _object(self, name: str):
-        if not isinstance(name, str):
-            raise RobotApiError(f'an object name must be text like "red block", not {type(name).__name__}')
+    def _name(self, name: Any) -> str:
+        """The scene's name for what the program passed ("the red block", ['red block'] -> 'red block'), or an error
+        naming the objects there are."""
+        if isinstance(name, str) and len(name) <= MAX_NAME_CHARS and name in self._known_names:
+            return name
+        candidate = object_name_candidate(name)
+        if candidate is None:
+            raise RobotApiError(f'an object name must be text like "red block", not {type(name).__name__}'
+                                + (f' of {len(name)} items' if isinstance(name, (list, tuple)) else ''))
+        names = self.get_obj_names()
+        self._known_names = set(names)
+        if candidate in self._known_names:
+            return candidate
+        shown = wire_text(repr(name), MAX_NAME_CHARS)
+        raise RobotApiError(f'there is no {shown} on the table; the objects are: {", ".join(names) or "none"}')
+
+    def _object(self, name: Any):
+        name = self._name(name)
         response = self._call(self._state, GetObjectState.Request(name=wire_text(name, MAX_NAME_CHARS)),
                               'the perception service')
         if not response.success:
@@ -128,10 +162,14 @@ class RosTabletopApi:
     # -------------------------------------------------------------------------------------------- motion
     def put_first_on_second(self, obj_name: str, target: Any) -> None:
         """Pick up `obj_name` and place it on `target`: an object name, or a table position [x, y] in metres."""
-        obj_name = wire_text(obj_name if isinstance(obj_name, str) else str(obj_name), MAX_NAME_CHARS)
+        obj_name = self._name(obj_name)
+        if obj_name not in self._moved_from:
+            self._moved_from[obj_name] = self.get_obj_pos(obj_name)
         goal = PickPlace.Goal(object_name=obj_name)
+        if isinstance(target, (list, tuple)) and len(target) == 1 and isinstance(target[0], str):
+            target = target[0]  # a one-name list, as parse_obj_name answers
         if isinstance(target, str):
-            target = wire_text(target, MAX_NAME_CHARS)
+            target = self._name(target)
             goal.target_name = target
             where = f'the {target}'
         else:

@@ -1,0 +1,1 @@
+"""The table-top development set: everyday commands judged on the simulator's final state (`cap bench devset`)."""

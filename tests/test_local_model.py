@@ -1,0 +1,87 @@
+"""The whole graph with the real local model (llama.cpp server and the default model of `make model`).
+
+lmp_node starts and supervises the server itself (llm_backend=local). One graph for the module: the model loads
+and reads its prompts once (minutes on one core). Without the installed model the module is skipped, unless
+CAP_REQUIRE_LOCAL_MODEL=1 (CI, after `make model`) makes that a failure.
+"""
+import os
+import signal
+import time
+
+import pytest
+
+from cap_bench.devset.bench import _episode_judge
+from cap_bench.devset.commands import BY_KEY
+from cap_bench.runner import BenchOptions, _EpisodeRunner
+from cap_lmp.local_server import local_model_installed
+from conftest import next_domain_id
+
+# The first test also waits for the model to load and read its prompts (the module's graph), the last for it to
+# read them again after a restart: minutes each on one core, more on a loaded machine.
+pytestmark = [pytest.mark.slow, pytest.mark.graph, pytest.mark.timeout(1800), pytest.mark.skipif(
+    not local_model_installed() and os.environ.get('CAP_REQUIRE_LOCAL_MODEL') != '1',
+    reason='the local model is not installed (make model)')]
+
+# Everyday commands of the development set, each judged on the simulator's final state.
+COMMANDS = ('bowl_by_name', 'block_on_block', 'to_corner')
+
+
+@pytest.fixture(scope='module')
+def local_graph():
+    with pytest.MonkeyPatch.context() as env:
+        env.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+        env.setenv('ROS_DOMAIN_ID', str(next_domain_id()))
+        runner = _EpisodeRunner(BenchOptions(policy='llm', backend='local', episode_timeout_s=300.0), None)
+        try:
+            yield runner
+        finally:
+            runner.close()
+
+
+def run(runner: _EpisodeRunner, key: str) -> dict:
+    command = BY_KEY[key]
+    return runner.run(command.episode(), judge=_episode_judge(command), instructions=command.instructions)
+
+
+@pytest.mark.parametrize('key', COMMANDS)
+def test_the_local_model_does_an_everyday_command(local_graph, key):
+    record = run(local_graph, key)
+    assert record['success'], f"{record['reason']}\n{record['code']}"
+    assert record['model_calls'] >= 1 and record['completion_tokens'] > 0
+
+
+def test_the_servers_death_mid_command_is_a_clear_error_and_the_server_comes_back(local_graph):
+    from cap_interfaces.msg import GraphNames, StatusEvent
+    from cap_lmp_ros.lmp_node import EVENT_QOS
+
+    node = local_graph.graph.nodes['lmp_node']
+    server = node.model_server
+    first_pid, first_start = server.pid, node.model_ready_generation
+    model_events = []
+    local_graph.node.create_subscription(
+        StatusEvent, GraphNames.STATUS_TOPIC,
+        lambda status: model_events.append(status.message) if status.stage == StatusEvent.STAGE_MODEL else None,
+        EVENT_QOS)
+
+    def kill_while_generating(feedback) -> None:
+        if feedback.feedback.status.stage == StatusEvent.STAGE_GENERATING and server.pid == first_pid:
+            os.kill(first_pid, signal.SIGKILL)
+
+    goal_future = local_graph.execute.send_goal_async(
+        local_graph.ExecuteCommand.Goal(command='put the red block in the blue bowl'),
+        feedback_callback=kill_while_generating)
+    goal = local_graph._call(goal_future, 30, 'lmp_node (goal)')
+    result = local_graph._call(goal.get_result_async(), 300, 'lmp_node (result)').result
+    assert result.outcome == local_graph.ExecuteCommand.Result.OUTCOME_MODEL_ERROR
+    assert 'the local model server stopped during the request (exit code -9)' in result.message
+    assert 'send the command again' in result.message
+
+    # restarted, its prompts read again, and answering: the next command is done
+    deadline = time.monotonic() + 900
+    while node.model_ready_generation <= first_start and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert server.pid != first_pid and node.model_ready_generation == first_start + 1
+    assert any('died (exit code -9); restarting' in message for message in model_events), model_events
+    assert any(message.startswith('model ready') for message in model_events), model_events
+    record = run(local_graph, 'to_middle')
+    assert record['success'], f"{record['reason']}\n{record['code']}"
