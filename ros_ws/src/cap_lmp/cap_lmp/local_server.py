@@ -236,6 +236,10 @@ class LocalModelServer:
                                    stderr=subprocess.STDOUT, text=True, errors='replace', start_new_session=True)
         _set_cpus(process.pid, self.settings.cpus)
         with self._lock:
+            if self._state.stopping:  # stop() came while the watcher was restarting: leave no process behind
+                process.kill()
+                process.wait()
+                return
             self._state.process = process
             self._state.generation += 1
             self._state.ready = False
