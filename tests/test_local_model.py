@@ -82,6 +82,7 @@ def test_the_servers_death_mid_command_is_a_clear_error_and_the_server_comes_bac
         time.sleep(0.5)
     assert server.pid != first_pid and node.model_ready_generation == first_start + 1
     assert any('died (exit code -9); restarting' in message for message in model_events), model_events
-    assert any(message.startswith('model ready') for message in model_events), model_events
+    assert any(message.startswith('model ready') and f'server start {first_start + 1};' in message
+               for message in model_events), model_events
     record = run(local_graph, 'to_middle')
     assert record['success'], f"{record['reason']}\n{record['code']}"

@@ -98,11 +98,21 @@ def model_endpoint(options: BenchOptions) -> Iterator[BenchOptions]:
     # Graph job i runs on CPU i (see _worker): the server takes the CPUs after those, if there are any.
     allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else []
     spare = tuple(allowed[max(1, options.jobs):])
+    heads = prompt_heads(get_domain('tabletop'))
+
+    def read_prompts_again(generation: int) -> None:  # a restarted server has an empty prompt cache
+        if generation > 1:
+            try:
+                print(f'warm-up after a restart: {warm_up(LocalModelClient(server), heads)}', file=sys.stderr)
+            except LLMError as error:  # the episodes then meet the cold cache, or the server's errors
+                print(f'warm-up after a restart failed: {error}', file=sys.stderr)
+
     server = LocalModelServer(ServerSettings(model_file=options.model_file, threads=options.model_threads,
-                                             cpus=spare), on_event=lambda message: print(message, file=sys.stderr))
-    server.start()
+                                             cpus=spare), on_event=lambda message: print(message, file=sys.stderr),
+                              on_ready=read_prompts_again)
+    server.start()  # stops the server itself if it cannot start
     try:
-        print(f'warm-up: {warm_up(LocalModelClient(server), prompt_heads(get_domain("tabletop")))}', file=sys.stderr)
+        print(f'warm-up: {warm_up(LocalModelClient(server), heads)}', file=sys.stderr)
         yield dataclasses.replace(options, backend='http', base_url=server.base_url, model=server.model_name,
                                   api='completions')
     finally:

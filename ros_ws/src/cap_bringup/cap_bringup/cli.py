@@ -297,6 +297,8 @@ def choose_backend(backend: str, model_file: str = '', cassette: str = '') -> st
         return backend
     if cassette:
         return 'cassette'
+    if model_file:  # a model named: the local backend, with its own error if the file is missing
+        return 'local'
     from cap_lmp.local_server import local_model_installed
     return 'local' if local_model_installed(model_file) else 'cassette'
 

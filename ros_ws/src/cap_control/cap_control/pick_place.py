@@ -679,8 +679,11 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     # overhanging one topples off, or the fingers push it off.
     check_place_on_table(obj, place_xy, config, support.name if support is not None else None)
     taken = target_taken_by(obj, place_xy, neighbours, config) if support is None else None
-    if taken is not None and math.dist(place_xy, taken.position[:2]) <= config.stack_radius:
-        # The point is the block's own position: stack on it, as if it had been named (and check that again).
+    at_point = [other for other in neighbours if other.category != CATEGORY_BOWL
+                and math.dist(place_xy, other.position[:2]) <= config.stack_radius]
+    if taken is not None and at_point:
+        # The point is a block's own position: stack on it (the top one of a stack there), as if it had been named.
+        taken = max(at_point, key=lambda other: other.top)
         support = target_object = taken
         place_xy = target_xy = (float(taken.position[0]), float(taken.position[1]))
         target_description = f'the {taken.name}'

@@ -250,6 +250,12 @@ def test_a_point_target_at_a_blocks_own_position_stacks_on_that_block():
     assert at_orange.place_z == pytest.approx(named.place_z) and at_orange.target_xy == named.target_xy
     (on_block,) = stage(at_orange, StageName.RETREAT).checks
     assert on_block.failure(Observation(object_position=(0.0, -0.55, 0.06))) is None
+    # at a tower's position: on its top block, whichever block perception lists first
+    top = block('blue block', 0.002, -0.548, z=orange.position[2] + 0.04)
+    for neighbours in ([orange, top], [top, orange]):
+        on_tower = plan_pick_place(red, (0.0, -0.55), HOME_JOINTS, neighbours=neighbours)
+        assert on_tower.target_description == 'the blue block'
+        assert on_tower.place_z == pytest.approx(plan_pick_place(red, top, HOME_JOINTS, neighbours=neighbours).place_z)
 
 
 def test_after_placing_at_a_point_the_block_must_rest_on_the_table_there():

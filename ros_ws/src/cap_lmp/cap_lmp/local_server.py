@@ -12,6 +12,7 @@ rate limits, and the one failure that matters, its death, is reported as such.
 from __future__ import annotations
 
 import collections
+import dataclasses
 import os
 import pathlib
 import socket
@@ -200,7 +201,11 @@ class LocalModelServer:
         self._watcher = threading.Thread(target=self._watch, args=(binary, model), name='llama-server-watch',
                                          daemon=True)
         self._watcher.start()
-        self.wait_ready(self.settings.startup_timeout_s)
+        try:
+            self.wait_ready(self.settings.startup_timeout_s)
+        except BaseException:  # too slow, given up or interrupted: leave no server behind
+            self.stop()
+            raise
 
     def stop(self, timeout_s: float = 10.0) -> None:
         """Stop the server (SIGTERM, then SIGKILL after `timeout_s`); safe to call more than once."""
@@ -232,8 +237,11 @@ class LocalModelServer:
                 '-c', str(s.context_size), '-np', '1', *s.extra_args]
 
     def _spawn(self, binary: str, model: pathlib.Path) -> None:
-        process = subprocess.Popen(self.command(binary, model), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                   stderr=subprocess.STDOUT, text=True, errors='replace', start_new_session=True)
+        try:
+            process = subprocess.Popen(self.command(binary, model), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                       stderr=subprocess.STDOUT, text=True, errors='replace', start_new_session=True)
+        except OSError as error:
+            raise LocalModelError(f'the llama.cpp server {binary} could not be started: {error}') from None
         _set_cpus(process.pid, self.settings.cpus)
         with self._lock:
             if self._state.stopping:  # stop() came while the watcher was restarting: leave no process behind
@@ -294,7 +302,14 @@ class LocalModelServer:
                     self._on_event(self._state.failed)
                     return
             self._on_event(f'local model server died (exit code {exit_code}); restarting')
-            self._spawn(binary, model)
+            try:
+                self._spawn(binary, model)
+            except LocalModelError as error:
+                with self._lock:
+                    self._state.failed = str(error)
+                    self._lock.notify_all()
+                self._on_event(str(error))
+                return
 
 
 class LocalModelClient:
@@ -310,11 +325,14 @@ class LocalModelClient:
     def complete(self, request: CompletionRequest) -> Completion:
         budget = request.time_budget_s
         wait_s = self.server.settings.startup_timeout_s if budget is None else max(0.0, budget)
+        started = time.monotonic()
         if self.gate is not None and not self.gate.wait(wait_s):
             raise LocalModelError(f'the local model is still starting (loading the model and reading the prompts '
                                   f'takes a while the first time); not ready within {wait_s:g} s: send the command '
                                   f'again when /cap/status says "model ready"')
-        self.server.wait_ready(wait_s)
+        self.server.wait_ready(max(0.0, wait_s - (time.monotonic() - started)))
+        if budget is not None:  # the wait came out of the request's budget
+            request = dataclasses.replace(request, time_budget_s=max(0.0, budget - (time.monotonic() - started)))
         generation = self.server.generation
         try:
             return self.http.complete(request)

@@ -163,8 +163,9 @@ class RosTabletopApi:
     def put_first_on_second(self, obj_name: str, target: Any) -> None:
         """Pick up `obj_name` and place it on `target`: an object name, or a table position [x, y] in metres."""
         obj_name = self._name(obj_name)
-        if obj_name not in self._moved_from:
-            self._moved_from[obj_name] = self.get_obj_pos(obj_name)
+        start_pos = self._moved_from.get(obj_name)
+        if start_pos is None:
+            start_pos = self.get_obj_pos(obj_name)
         goal = PickPlace.Goal(object_name=obj_name)
         if isinstance(target, (list, tuple)) and len(target) == 1 and isinstance(target[0], str):
             target = target[0]  # a one-name list, as parse_obj_name answers
@@ -206,6 +207,7 @@ class RosTabletopApi:
             raise StoppedError(f'stopped while moving the {obj_name} to {where}')
         if result.error_code != PickPlace.Result.NONE:
             raise RobotApiError(result.error_msg or f'could not put the {obj_name} on {where}')
+        self._moved_from.setdefault(obj_name, start_pos)  # moved: where it was is what "undo that" needs
 
     def say(self, text: Any) -> None:
         """Say something to the user (published on /cap/say)."""
