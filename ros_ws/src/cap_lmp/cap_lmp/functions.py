@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import ast
+import keyword as keyword_module
 from dataclasses import dataclass
 from typing import AbstractSet
 
@@ -47,19 +48,23 @@ def parameter_name(argument: ast.expr) -> str:
 def parameter_signature(call: ast.Call) -> str:
     """The call with a parameter name in place of each argument: `f(get_obj_pos('a'), 2, r=0.1)` -> `f(obj_pos,
     x2, r)`. Names repeat-free; keyword arguments keep their keyword; `*xs` and `**kw` stay starred."""
-    names: list[str] = []
+    keywords = [keyword.arg if keyword.arg else '**kwargs' for keyword in call.keywords]
+    taken = set(keywords)  # a keyword's name is fixed by the call: positional names give way to it
+    positional: list[str] = []
     for index, argument in enumerate(call.args, start=1):
         if isinstance(argument, ast.Starred):
-            names.append('*' + (parameter_name(argument.value) or 'args'))
-            continue
-        names.append(parameter_name(argument) or f'x{index}')
-    names += [keyword.arg if keyword.arg else '**kwargs' for keyword in call.keywords]
-    seen: dict[str, int] = {}
-    unique = []
-    for name in names:
-        count = seen.get(name, 0)
-        seen[name] = count + 1
-        unique.append(name if count == 0 else f'{name}{count + 1}')
+            name = '*' + (parameter_name(argument.value) or 'args')
+        else:
+            name = parameter_name(argument) or f'x{index}'
+            if keyword_module.iskeyword(name):
+                name = f'x{index}'
+        base, count = name, 1
+        while name in taken:
+            count += 1
+            name = f'{base}{count}'
+        taken.add(name)
+        positional.append(name)
+    unique = positional + keywords
     return f'{ast.unparse(call.func)}({", ".join(unique)})'
 
 

@@ -3,7 +3,7 @@ import ast
 
 import pytest
 
-from cap_lmp.functions import undefined_calls
+from cap_lmp.functions import parameter_signature, undefined_calls
 
 KNOWN = {'get_obj_pos', 'get_obj_names', 'parse_position', 'len', 'say'}
 
@@ -23,6 +23,7 @@ def asked(source: str, style: str) -> list[str]:
     ("shift(0.1, 'red block', *rest, **options)", "shift(0.1, 'red block', *rest, **options)",
      'shift(x1, name, *rest, **kwargs)'),
     ('greet()', 'greet()', 'greet()'),
+    ('pts = spread(len(names), n=3)', 'pts = spread(len(names), n=3)', 'pts = spread(n2, n)'),
 ])
 def test_a_missing_function_is_asked_for_as_called_or_with_parameter_names(source, call_style, parameter_style):
     assert asked(source, 'call') == [call_style]
@@ -30,3 +31,8 @@ def test_a_missing_function_is_asked_for_as_called_or_with_parameter_names(sourc
     # the parameter form is a valid `def` line once `def ` is put before the call
     call = parameter_style.split(' = ', 1)[-1]
     ast.parse(f'def {call}:\n    pass')
+
+
+def test_a_parameter_name_is_never_a_python_keyword():
+    call = ast.parse("f(get_lambda('x'), get_class('y'))").body[0].value
+    assert parameter_signature(call) == 'f(x1, x2)'
