@@ -127,7 +127,9 @@ class RosTabletopApi:
         self._known_names = set(names)
         if candidate in self._known_names:
             return candidate
-        shown = wire_text(repr(name), MAX_NAME_CHARS)
+        # Made sendable first (a lone surrogate becomes U+FFFD), then quoted.
+        shown = repr(wire_text(name, MAX_NAME_CHARS)) if isinstance(name, str) else \
+            wire_text(repr(name), MAX_NAME_CHARS)
         raise RobotApiError(f'there is no {shown} on the table; the objects are: {", ".join(names) or "none"}')
 
     def _object(self, name: Any):
