@@ -16,7 +16,7 @@ _BLOCKS = "block_names = [name for name in get_obj_names() if name.endswith('blo
 _BOWLS = "bowl_names = [name for name in get_obj_names() if name.endswith('bowl')]\n"
 
 
-def _position(name: str) -> str:
+def position_code(name: str) -> str:
     """The named position as generated code would write it, in normalised table coordinates."""
     normalised = (np.array(table.NAMED_POSITIONS[name]) - NORMALISED_ORIGIN) / NORMALISED_SPAN
     return f'denormalize_xy({[float(v) for v in normalised]})'
@@ -41,7 +41,7 @@ def oracle_program(episode: Episode) -> str:
         # The pair stands across the line to the table's middle, 1.5 cm in from the place, so that at a corner
         # neither block hangs over an edge. The blocks nearest the place go first, so that none still stands on a
         # spot when a block is set down there.
-        return (_BLOCKS + f"target_xy = {_position(a['corner_side'])}\n"
+        return (_BLOCKS + f"target_xy = {position_code(a['corner_side'])}\n"
                           "block_names = sorted(block_names, key=lambda name: np.linalg.norm(get_obj_pos(name) - "
                           "target_xy))\n"
                           f"inward = np.array({list(table.SIDES['middle'])}) - target_xy\n"
@@ -70,23 +70,23 @@ def oracle_program(episode: Episode) -> str:
         return (_BLOCKS + f"bowl_xy = get_obj_pos({a['bowl']!r})\n"
                 f"ahead = [np.dot(get_obj_pos(name) - bowl_xy, {_unit(a['direction'])}) for name in block_names]\n"
                 "block = block_names[int(np.argmax(ahead))]\n"
-                f"put_first_on_second(block, {_position(a['corner_side'])})\n")
+                f"put_first_on_second(block, {position_code(a['corner_side'])})\n")
     if template == 'block_by_distance':
         pick = 'argmax' if a['distance'] == 'farthest' else 'argmin'
         return (_BLOCKS + f"bowl_xy = get_obj_pos({a['bowl']!r})\n"
                 "distances = [np.linalg.norm(get_obj_pos(name) - bowl_xy) for name in block_names]\n"
                 f"block = block_names[int(np.{pick}(distances))]\n"
-                f"put_first_on_second(block, {_position(a['corner_side'])})\n")
+                f"put_first_on_second(block, {position_code(a['corner_side'])})\n")
     if template == 'nth_block':
         return (_BLOCKS + f"ordered = sorted(block_names, key=lambda name: -np.dot(get_obj_pos(name), "
                 f"{_unit(a['direction'])}))\n"
-                f"put_first_on_second(ordered[{ORDINALS[a['nth']]}], {_position(a['corner_side'])})\n")
+                f"put_first_on_second(ordered[{ORDINALS[a['nth']]}], {position_code(a['corner_side'])})\n")
     if template == 'different_corners':
-        corners = ', '.join(_position(c) for c in table.CORNERS)
+        corners = ', '.join(position_code(c) for c in table.CORNERS)
         return (_BLOCKS + f"corners = [{corners}]\n"
                           "for name, corner in zip(block_names, corners):\n    put_first_on_second(name, corner)\n")
     if template == 'stack_on_corner':
-        return (_BLOCKS + f"put_first_on_second(block_names[0], {_position(a['corner_side'])})\n"
+        return (_BLOCKS + f"put_first_on_second(block_names[0], {position_code(a['corner_side'])})\n"
                           "for lower, upper in zip(block_names, block_names[1:]):\n"
                           "    put_first_on_second(upper, lower)\n")
     if template == 'place_by_magnitude':
@@ -95,7 +95,7 @@ def oracle_program(episode: Episode) -> str:
                 f"put_first_on_second({a['block1']!r}, target_xy)\n")
     if template == 'corner_by_distance':
         pick = 'max' if a['distance'] == 'farthest' else 'min'
-        corners = ', '.join(_position(c) for c in table.CORNERS)
+        corners = ', '.join(position_code(c) for c in table.CORNERS)
         return (f"bowl_xy = get_obj_pos({a['bowl']!r})\n"
                 f"corner = {pick}([{corners}], key=lambda xy: np.linalg.norm(xy - bowl_xy))\n"
                 f"put_first_on_second({a['block1']!r}, corner)\n")

@@ -19,11 +19,11 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from cap_bench.oracle import position_code
 from cap_bench import table
 from cap_bench.episodes import MAGNITUDE_DISTANCES, Episode, SceneObject
 from cap_bench.success import (LINE_MIN_GAP, LINE_SPREAD, MAGNITUDE_PERPENDICULAR, MAGNITUDE_RANGE, NEAR_PLACE,
                                OK, STACK_STEP, UNTOUCHED, Verdict, is_on)
-from cap_tabletop.workspace import NORMALISED_ORIGIN, NORMALISED_SPAN
 
 GROUP = 'dev'  # the group name of a development command's episode (a benchmark record's group is SA-SI etc.)
 SHIFT_TOLERANCE = 0.03  # "10 cm to the left": within 3 cm of the asked displacement, along and across
@@ -108,14 +108,18 @@ def _where_started(obj: str, start_of: str | None = None) -> Condition:
     return check
 
 
+def _along_across(vector: np.ndarray, unit: np.ndarray) -> tuple[float, float]:
+    """How far `vector` goes along `unit`, and how far sideways of it (unsigned)."""
+    return float(vector @ unit), abs(float(vector @ np.array([-unit[1], unit[0]])))
+
+
 def _shifted(obj: str, offset: Sequence[float], along_range: tuple[float, float], across_limit: float) -> Condition:
     """`obj` moved from its start in the direction of `offset` by a distance in `along_range`, and at most
     `across_limit` sideways."""
     unit = np.asarray(offset, dtype=float) / np.linalg.norm(offset)
 
     def check(scene: Episode, initial: Positions, final: Positions) -> Verdict:
-        moved = _xy(final[obj]) - _xy(initial[obj])
-        along, across = float(moved @ unit), abs(float(moved @ np.array([-unit[1], unit[0]])))
+        along, across = _along_across(_xy(final[obj]) - _xy(initial[obj]), unit)
         if not along_range[0] <= along <= along_range[1]:
             return Verdict(False, f'{obj} moved {along:.3f} m in the asked direction, not '
                                   f'{along_range[0]:.2f}-{along_range[1]:.2f} m')
@@ -130,8 +134,7 @@ def _beside(obj: str, anchor: str, direction: str) -> Condition:
     unit = np.array(table.DIRECTIONS[direction])
 
     def check(scene: Episode, initial: Positions, final: Positions) -> Verdict:
-        offset = _xy(final[obj]) - _xy(final[anchor])
-        along, across = float(offset @ unit), abs(float(offset @ np.array([-unit[1], unit[0]])))
+        along, across = _along_across(_xy(final[obj]) - _xy(final[anchor]), unit)
         if not BESIDE_GAP[0] <= along <= BESIDE_GAP[1]:
             return Verdict(False, f'{obj} is {along:.3f} m to the {direction} of the {anchor}, not '
                                   f'{BESIDE_GAP[0]}-{BESIDE_GAP[1]} m')
@@ -218,12 +221,6 @@ def _command(key: str, instructions: str | tuple[str, ...], objects: Sequence[Sc
 
 
 # ------------------------------------------------------------------------------------------------ references
-def _place(name: str) -> str:
-    """A named position as generated code writes it: denormalize_xy of its normalised table coordinates."""
-    normalised = (np.array(table.NAMED_POSITIONS[name]) - NORMALISED_ORIGIN) / NORMALISED_SPAN
-    return f'denormalize_xy({[round(float(v), 4) for v in normalised]})'
-
-
 def _put(obj: str, target: str) -> str:
     return f'put_first_on_second({obj!r}, {target})\n'
 
@@ -274,16 +271,16 @@ def _commands() -> tuple[DevCommand, ...]:
         _command('to_middle', 'move the blue block to the middle of the table',
                  [_block('blue', -0.15, -0.6), _block('red', 0.14, -0.38), _bowl('green', 0.12, -0.62),
                   _bowl('yellow', -0.12, -0.36)],
-                 _put('blue block', _place('middle')), [_on('blue block', 'middle')], ['blue block']),
+                 _put('blue block', position_code('middle')), [_on('blue block', 'middle')], ['blue block']),
         _command('to_corner', 'put the orange block in the top right corner',
                  [_block('orange', -0.1, -0.55), _block('blue', 0.05, -0.4), _bowl('red', -0.1, -0.35),
                   _bowl('green', 0.12, -0.6)],
-                 _put('orange block', _place('top right corner')), [_on('orange block', 'top right corner')],
+                 _put('orange block', position_code('top right corner')), [_on('orange block', 'top right corner')],
                  ['orange block']),
         _command('to_side', 'move the red block over to the left side',
                  [_block('red', 0.1, -0.45), _block('yellow', -0.05, -0.62), _bowl('blue', -0.1, -0.36),
                   _bowl('orange', 0.12, -0.63)],
-                 _put('red block', _place('left side')), [_on('red block', 'left side')], ['red block']),
+                 _put('red block', position_code('left side')), [_on('red block', 'left side')], ['red block']),
         _command('ten_cm_left', 'move the green block 10 cm to the left',
                  [_block('green', 0.05, -0.5), _block('red', -0.15, -0.4), _bowl('yellow', 0.0, -0.66),
                   _bowl('blue', 0.15, -0.35)],
@@ -310,7 +307,7 @@ def _commands() -> tuple[DevCommand, ...]:
                  [_block('red', -0.12, -0.38), _block('green', 0.12, -0.62), _block('yellow', 0.15, -0.36),
                   _bowl('blue', -0.14, -0.62)],
                  "red_xy = get_obj_pos('red block')\ngreen_xy = get_obj_pos('green block')\n"
-                 + _put('red block', _place(SWAP_PARKING)) + _put('green block', 'red_xy')
+                 + _put('red block', position_code(SWAP_PARKING)) + _put('green block', 'red_xy')
                  + _put('red block', 'green_xy'),
                  [_where_started('red block', 'green block'), _where_started('green block', 'red block')],
                  ['red block', 'green block']),
@@ -352,7 +349,7 @@ def _commands() -> tuple[DevCommand, ...]:
                                   'from the left',
                  [_block('red', 0.1, -0.45), _block('green', -0.1, -0.55), _block('blue', 0.12, -0.65),
                   _block('orange', 0.0, -0.4), _bowl('yellow', -0.15, -0.38)],
-                 f"row_xy = {_place('top side')}\n"
+                 f"row_xy = {position_code('top side')}\n"
                  f"for i, name in enumerate({list(row)!r}):\n"
                  f"    put_first_on_second(name, row_xy + np.array([(i - 1) * {ROW_SPACING}, 0.0]))\n",
                  [_row(row, 'top side')], row),
@@ -367,7 +364,7 @@ def _commands() -> tuple[DevCommand, ...]:
         _command('out_of_bowl', 'take the green block out of the blue bowl and put it in the top left corner',
                  [*_bowl_holding('blue', 'green', 0.1, -0.45), _block('red', -0.12, -0.6),
                   _bowl('yellow', -0.1, -0.4), _block('orange', 0.12, -0.65)],
-                 _put('green block', _place('top left corner')), [_on('green block', 'top left corner')],
+                 _put('green block', position_code('top left corner')), [_on('green block', 'top left corner')],
                  ['green block']),
         _command('loose_blocks', "collect the blocks that aren't in any bowl into the orange bowl",
                  [*_bowl_holding('yellow', 'red', -0.12, -0.4), _bowl('orange', 0.12, -0.6),
@@ -380,7 +377,8 @@ def _commands() -> tuple[DevCommand, ...]:
         _command('two_corners', 'put the red block in the top left corner and the blue block in the top right corner',
                  [_block('red', 0.1, -0.5), _block('blue', -0.1, -0.5), _bowl('green', 0.0, -0.35),
                   _block('yellow', 0.0, -0.65)],
-                 _put('red block', _place('top left corner')) + _put('blue block', _place('top right corner')),
+                 _put('red block', position_code('top left corner'))
+                 + _put('blue block', position_code('top right corner')),
                  [_on('red block', 'top left corner'), _on('blue block', 'top right corner')],
                  ['red block', 'blue block']),
     )
