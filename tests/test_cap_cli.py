@@ -77,7 +77,7 @@ def _wait_for_line(lines: queue.Queue, seen: list, text: str, timeout: float) ->
 def cli_graph(ros_isolation, tmp_path):
     """`cap up` with the command-line test programs (cap_bringup.testing.cli_scenes), stopped with Ctrl-C at the end."""
     cassette = write_cli_cassette(tmp_path / 'cli.yaml')
-    graph = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'up', '--cassette', str(cassette)],
+    graph = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'up', '--fast', '--cassette', str(cassette)],
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=os.environ.copy())
     try:
         yield graph

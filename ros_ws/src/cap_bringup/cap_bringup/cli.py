@@ -261,7 +261,7 @@ def stop(server_timeout: float, namespace: str = '') -> int:
 def snapshot(cameras: Sequence[str], out_dir: pathlib.Path, server_timeout: float, namespace: str = '') -> int:
     """Save one colour image per camera as PNG."""
     import cv2
-    from rclpy.qos import qos_profile_sensor_data
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import Image
 
     from cap_interfaces.msg import GraphNames
@@ -269,10 +269,13 @@ def snapshot(cameras: Sequence[str], out_dir: pathlib.Path, server_timeout: floa
 
     session = _Session('cap_snapshot', namespace)
     images: dict[str, Image] = {}
+    # Reliable, as the bridge publishes: one whole frame is wanted, and a best-effort frame of a megabyte loses a
+    # fragment now and then (the idle bridge sends a frame a second, so a lost one would cost the wait).
+    frame_qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
     try:
         for camera in cameras:
             session.node.create_subscription(Image, f'{GraphNames.CAMERA_NAMESPACE}/{camera}/color',
-                                             lambda m, c=camera: images.setdefault(c, m), qos_profile_sensor_data)
+                                             lambda m, c=camera: images.setdefault(c, m), frame_qos)
         if not session.spin_until(lambda: len(images) == len(cameras), server_timeout):
             missing = ', '.join(sorted(set(cameras) - set(images)))
             _error(f'error: no image from camera(s) {missing} within {server_timeout:g} s')
@@ -403,7 +406,9 @@ def build_parser() -> argparse.ArgumentParser:
     p_up.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_up.add_argument('--seed', type=int, default=0, help='scene seed [0]')
     p_up.add_argument('--objects', default='', help='comma-separated objects, e.g. "red block, blue bowl"')
-    p_up.add_argument('--real-time', action='store_true', help='simulate in real time (default: as fast as possible)')
+    p_up.add_argument('--fast', action='store_true',
+                      help='simulate as fast as possible (default: in real time, as a robot moves; an idle graph '
+                           'then costs a few percent of a core)')
     p_up.add_argument('--perception', choices=('ground_truth', 'rgbd'), default='ground_truth')
     p_up.add_argument('--backend', choices=('auto', 'local', 'cassette', 'http'), default='auto',
                       help='local (the llama.cpp server and model of `make model`), cassette (offline replay), '
@@ -459,7 +464,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_UNREACHABLE
     _signals()  # from here on SIGINT / SIGTERM end the command cleanly (rclpy's imports take a while)
     if args.command == 'up':
-        return up(args.seed, args.objects, args.real_time, args.perception, args.backend, args.cassette, args.record,
+        return up(args.seed, args.objects, not args.fast, args.perception, args.backend, args.cassette, args.record,
                   args.namespace, args.domain, args.cpu, args.model_file, args.model_threads)
     if args.command == 'send':
         return send(args.text, args.wait, args.timeout, namespace=args.namespace)

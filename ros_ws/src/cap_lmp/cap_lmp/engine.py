@@ -44,11 +44,13 @@ import traceback
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping
 
-from cap_lmp.errors import CapLLMError, CodeRejected, ExecutionStopped, GenerationError
+from cap_lmp.errors import (CapLLMError, CodeRejected, ExecutionStopped, GenerationError, UndefinedName,
+                            UnusableAnswer)
 from cap_lmp.functions import top_level_functions, undefined_calls
 from cap_lmp.llm import Completion, CompletionRequest, LLMClient
 from cap_lmp.outcome import Outcome, outcome_of
 from cap_lmp.provided_imports import drop_provided_imports
+from cap_lmp.unbound import bound_names, unbound_names
 from cap_lmp.sandbox import SANDBOX_FILE_PREFIX, CompiledProgram, Sandbox, SandboxLimits, bounded_exception_text
 from cap_lmp.wire import MAX_PROGRAM_CHARS
 
@@ -142,6 +144,13 @@ class PreparedCode:
         return '\n\n'.join(part for part in parts if part)
 
 
+def _worth_asking_again(error: Exception) -> bool:
+    """An answer that cannot run (another sample may), not one the sandbox refused on purpose (final)."""
+    if isinstance(error, (UndefinedName, UnusableAnswer)):
+        return True
+    return isinstance(error, CodeRejected) and 'syntax error' in str(error)
+
+
 def check_program_size(text: str, what: str = "the model's answer") -> None:
     """Refuse a program longer than wire.MAX_PROGRAM_CHARS before it is parsed or run."""
     if len(text) > MAX_PROGRAM_CHARS:
@@ -196,7 +205,8 @@ class Engine:
     def __init__(self, lmps: Iterable[LMPConfig], client: LLMClient, api: Mapping[str, Any] | None = None, *,
                  limits: SandboxLimits | None = None, default_lmp: str | None = None, fgen_lmp: str | None = 'fgen',
                  max_function_depth: int = 4, max_generated_functions: int = 16,
-                 model_time_limit_s: float = 120.0) -> None:
+                 model_time_limit_s: float = 120.0, regenerations: int = 0,
+                 regeneration_temperature: float = 0.7) -> None:
         self.lmps: dict[str, LMPConfig] = {config.name: config for config in lmps}
         if not self.lmps:
             raise ValueError('an Engine needs at least one LMP')
@@ -208,6 +218,8 @@ class Engine:
         self.max_function_depth = max_function_depth
         self.max_generated_functions = max_generated_functions
         self.model_time_limit_s = model_time_limit_s
+        self.regenerations = regenerations
+        self.regeneration_temperature = regeneration_temperature
         self._listeners: list[Callable[[EngineEvent], None]] = []
         self._cancel = threading.Event()
         self._run_lock = threading.Lock()
@@ -275,14 +287,17 @@ class Engine:
             return '\n'.join(part for part in parts if part)
         return '\n'.join(parts) + '\n'
 
-    def _ask(self, config: LMPConfig, query: str, context: str) -> str:
+    def _ask(self, config: LMPConfig, query: str, context: str, attempt: int = 0) -> str:
+        """The model's answer; a later attempt (after an unusable answer) is sampled, with the attempt as seed."""
         self._check_cancel()
         remaining = self.model_time_limit_s - self._stats.model_s
         if remaining <= 0:
             self._model_deadline_passed()
+        temperature = config.temperature if attempt == 0 else max(config.temperature, self.regeneration_temperature)
         request = CompletionRequest(lmp=config.name, prompt=self.build_prompt(config, query, context), query=query,
                                     context=context, stop=config.stop, max_tokens=config.max_tokens,
-                                    temperature=config.temperature, time_budget_s=remaining)
+                                    temperature=temperature, seed=attempt if attempt else None,
+                                    time_budget_s=remaining)
         started = time.monotonic()
         completion: Completion | None = None
         try:
@@ -335,10 +350,12 @@ class Engine:
             code = config.prepare_source(code)
         return drop_provided_imports(code, known)
 
-    def _prepare(self, config: LMPConfig, code: str) -> PreparedCode:
+    def _prepare(self, config: LMPConfig, code: str, context: str = '',
+                 variables: Iterable[str] = ()) -> PreparedCode:
         known = self._known_names()
         code = self._source(config, code, known)
         tree = self.sandbox.check(code)
+        self._check_names(config, tree, code, known | self._context_names(config, context) | set(variables))
         functions: list[tuple[str, CompiledProgram]] = []
         if config.generate_functions:
             self._define_missing(tree, known, (), functions)
@@ -349,6 +366,27 @@ class Engine:
         prepared = PreparedCode(self.sandbox.compile_checked(tree, code, config.name), tuple(functions))
         check_program_size(prepared.full_code(), 'the program with the functions generated for it')
         return prepared
+
+    @staticmethod
+    def _context_names(config: LMPConfig, context: str) -> set[str]:
+        """What the context line binds before the code runs (`objects`), if it runs."""
+        if not context or not config.execute_context:
+            return set()
+        try:
+            return bound_names(ast.parse(context))
+        except (SyntaxError, ValueError, RecursionError, MemoryError):
+            return set()  # the context's own run reports it
+
+    def _check_names(self, config: LMPConfig, tree: Any, code: str, known: set[str]) -> None:
+        """A name the program reads and nothing binds is a NameError to come: refuse it before anything runs."""
+        unbound = unbound_names(tree, known)
+        if unbound:
+            first = unbound[0]
+            lines = code.splitlines()
+            text = lines[first.line - 1].strip() if 0 < first.line <= len(lines) else None
+            origin = 'the generated program' if config.name == self.default_lmp else \
+                f'the generated {config.name} program'
+            raise UndefinedName(first.name, first.line, text, origin)
 
     def _define_missing(self, tree: Any, known: set[str], chain: tuple[str, ...],
                         out: list[tuple[str, CompiledProgram]]) -> None:
@@ -378,19 +416,36 @@ class Engine:
             defined = top_level_functions(function_tree)
             if missing.name not in defined:
                 found = ', '.join(f'{name}()' for name in defined) or 'no function'
-                raise GenerationError(f'asked the model to define {missing.name}(), but its code defines {found}')
+                raise UnusableAnswer(f'asked the model to define {missing.name}(), but its code defines {found}')
             self._define_missing(function_tree, known | set(defined), chain + (missing.name,), out)
             out.append((missing.name, self.sandbox.compile_checked(function_tree, source, f'function {missing.name}')))
 
-    def generate(self, lmp: str, query: str, context: str = '') -> PreparedCode:
-        """Ask the LMP's model for code and prepare it (checked, missing functions generated); nothing runs."""
+    def generate(self, lmp: str, query: str, context: str = '', variables: Iterable[str] = ()) -> PreparedCode:
+        """Ask the LMP's model for code and prepare it (checked, missing functions generated); nothing runs.
+
+        An answer that cannot run at all (a syntax error, a name nothing defines, a generated function that does
+        not define itself) is asked for again up to `regenerations` times, sampled at `regeneration_temperature`
+        (a small model at temperature 0 gives the same answer again); a refusal of the sandbox is final.
+        `variables`: names the caller sets in the program's scope before it runs.
+        """
         config = self.lmps[lmp]
-        self._emit(GENERATING, lmp, message=query)
-        code = self._ask(config, query, context)
-        if config.answer_continues_query:
-            code = f'{config.query_prefix}{query}{config.query_suffix}{code}'
-            check_program_size(code, 'the query with the answer')
-        return self._prepare(config, code)
+        variables = tuple(variables)
+        attempt = 0
+        while True:
+            self._emit(GENERATING, lmp, message=query)
+            generated = len(self._stats.generated)
+            code = self._ask(config, query, context, attempt)
+            if config.answer_continues_query:
+                code = f'{config.query_prefix}{query}{config.query_suffix}{code}'
+                check_program_size(code, 'the query with the answer')
+            try:
+                return self._prepare(config, code, context, variables)
+            except (CodeRejected, GenerationError) as error:
+                if attempt >= self.regenerations or not _worth_asking_again(error):
+                    raise
+                del self._stats.generated[generated:]  # the functions of the unusable answer are not kept
+                attempt += 1
+                self._emit(GENERATING, lmp, message=f'{query} (asking again, the answer could not run: {error})')
 
     # -- execution -------------------------------------------------------------------------------------------
     def _execute(self, config: LMPConfig, prepared: PreparedCode, query: str, context: str,
@@ -433,10 +488,10 @@ class Engine:
         watchdog = self.sandbox.watchdog
         if watchdog is not None:  # called from a running program: our own host work needs no tracing
             with watchdog.suspended():
-                prepared = self.generate(lmp, query, context)
+                prepared = self.generate(lmp, query, context, variables)
             watchdog.check()
         else:
-            prepared = self.generate(lmp, query, context)
+            prepared = self.generate(lmp, query, context, variables)
         self._emit(CODE, lmp, code=prepared.full_code())
         return self._execute(config, prepared, query, context, variables)
 
@@ -521,12 +576,16 @@ class Engine:
 
     def _describe_failure(self, result: CommandResult, error: Exception) -> None:
         line, source_line, origin = self._locate(error)
-        if isinstance(error, CodeRejected):
+        if isinstance(error, UndefinedName):
+            result.error_type = 'NameError'
+            line, source_line = error.line, error.source_line
+            result.message = str(error)
+        elif isinstance(error, CodeRejected):
             result.error_type = 'SyntaxError' if 'syntax error' in str(error) else 'CodeRejected'
             line, source_line = error.line, error.source_line
             result.message = f'the generated code was refused: {error}'
         elif isinstance(error, CapLLMError):
-            result.error_type = type(error).__name__
+            result.error_type = 'GenerationError' if isinstance(error, GenerationError) else type(error).__name__
             result.message = str(error)
             if isinstance(error, ExecutionStopped):
                 result.stop_reason = error.reason

@@ -19,6 +19,16 @@ class CodeRejected(SandboxError):
         self.source_line = source_line
 
 
+class UndefinedName(CodeRejected):
+    """The code reads a name that nothing defines (a NameError found before it ran, so nothing ran)."""
+
+    def __init__(self, name: str, line: int, source_line: str | None, origin: str) -> None:
+        where = f' (line {line} of {origin}: `{source_line}`)' if source_line else ''
+        super().__init__(f'NameError: name {name!r} is not defined{where}; found before the code ran, so nothing '
+                         'ran', line, source_line)
+        self.name = name
+
+
 class ExecutionStopped(SandboxError):
     """The running program was stopped: time limit, cancellation, memory or recursion limit, model deadline.
 
@@ -41,6 +51,11 @@ class OperationRefused(SandboxError):
 
 class GenerationError(CapLLMError):
     """Code generation failed: the model defined the wrong function, a depth or cycle limit was hit, ..."""
+
+
+class UnusableAnswer(GenerationError):
+    """The model's answer cannot be used as it is (e.g. asked for a function, it defined another one); another
+    answer may do. Limits of generation (depth, count) are plain GenerationErrors: final."""
 
 
 class LLMError(CapLLMError):

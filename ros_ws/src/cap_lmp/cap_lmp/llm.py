@@ -41,6 +41,7 @@ class CompletionRequest:
     stop: tuple[str, ...] = ()
     max_tokens: int = 512
     temperature: float = 0.0
+    seed: int | None = None  # for temperature > 0: the sampler's seed, so that a run can be repeated
     time_budget_s: float | None = None  # the most this request may take, retries included; None: no bound
 
 
@@ -157,6 +158,8 @@ class OpenAICompatibleClient:
     def _payload(self, request: CompletionRequest) -> tuple[str, dict[str, Any]]:
         payload: dict[str, Any] = {'model': self.model, 'temperature': request.temperature,
                                    'max_tokens': request.max_tokens}
+        if request.seed is not None:
+            payload['seed'] = request.seed
         # Chat models tend to open with a comment echoing the query, so a stop of '#' sent to the server would end
         # the answer before any code: for chat the stop sequences are applied here, at line starts, instead.
         if request.stop and self.api == 'completions':

@@ -146,12 +146,13 @@ class LmpNode(Node):
         if config.sandbox_process:
             isolated = IsolatedEngine(self.domain.build_engine, api, client, limits,
                                       stall_limit_s=config.stall_limit_s,
-                                      model_time_limit_s=config.model_time_limit_s, jail=config.jail)
+                                      model_time_limit_s=config.model_time_limit_s, jail=config.jail,
+                                      engine_options={'regenerations': config.regenerations})
             where = f'sandbox process {isolated.pid}'
             self.engine = isolated
         else:
-            self.engine = self.domain.build_engine(api, client, limits,
-                                                   model_time_limit_s=config.model_time_limit_s)
+            self.engine = self.domain.build_engine(api, client, limits, model_time_limit_s=config.model_time_limit_s,
+                                                   regenerations=config.regenerations)
             where = 'in-process sandbox'
         self.engine.add_listener(self._on_engine_event)
         self.queue = CommandQueue(config.max_queued_commands)

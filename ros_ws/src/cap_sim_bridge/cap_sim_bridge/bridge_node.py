@@ -8,6 +8,10 @@ action and a GripperCommand action. Like a robot driver it does not listen to /c
 runs in a thread of its own (never on an executor thread); the callbacks, which may block while a motion runs, need
 a MultiThreadedExecutor with a few threads (main() uses 8). Parameters: SimBridgeConfig (cap_sim_bridge.config).
 
+Idle: in real time, once no goal has run and nothing has moved for `idle_after` seconds (rest.py), /clock,
+/joint_states, the objects and the cameras drop to their idle rates (the cameras resend the frame rendered when the
+world came to rest); a goal or a reset ends the idling at once. As fast as possible, the bridge never idles.
+
 QoS, chosen on purpose:
 - /clock, /joint_states: reliable, keep last 10 (the defaults robot_state_publisher and sim-time users expect;
   a reliable publisher also serves best-effort subscribers);
@@ -21,6 +25,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -42,6 +47,7 @@ from cap_ros_common.time import duration_msg, time_msg
 from cap_sim_bridge import ros_conversions as conv
 from cap_sim_bridge import trajectory_goal
 from cap_sim_bridge.pacing import Pacer
+from cap_sim_bridge.rest import RestWatch
 from cap_sim_bridge.config import SimBridgeConfig, cameras_to_publish
 from cap_sim_bridge.scene import ObjectSpec
 from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES, TabletopWorld
@@ -99,17 +105,22 @@ class SimBridgeNode(Node):
         callbacks = ReentrantCallbackGroup()
         self.create_service(ResetScene, GraphNames.SIM_RESET_SERVICE, self._on_reset, callback_group=callbacks)
         self._trajectory_server = ActionServer(
-            self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION, self._execute_trajectory,
+            self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION,
+            lambda handle: self._while_running(self._execute_trajectory, handle),
             goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
             callback_group=callbacks)
         self._gripper_server = ActionServer(
-            self, GripperCommand, GraphNames.SIM_GRIPPER_ACTION, self._execute_gripper,
+            self, GripperCommand, GraphNames.SIM_GRIPPER_ACTION,
+            lambda handle: self._while_running(self._execute_gripper, handle),
             goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
             callback_group=callbacks)
 
         self._publish_scene()
         self._stop = threading.Event()
         self._scene_reset = threading.Event()
+        self._woken = threading.Event()  # a goal or a reset: the physics loop stops waiting and stops idling
+        self._goals_running = 0  # trajectory and gripper goals being executed (the world is not idle meanwhile)
+        self._goals_lock = threading.Lock()
         self._physics = threading.Thread(target=self._run_physics, name='sim_physics', daemon=True)
         self._physics.start()
         mode = f'{self._real_time_factor:g}x real time' if self._real_time_factor > 0 else 'as fast as possible'
@@ -118,6 +129,7 @@ class SimBridgeNode(Node):
 
     def destroy_node(self) -> None:
         self._stop.set()
+        self._woken.set()
         self._physics.join(timeout=10.0)
         self._trajectory_server.destroy()
         self._gripper_server.destroy()
@@ -126,23 +138,33 @@ class SimBridgeNode(Node):
     # ------------------------------------------------------------------------------------------- physics
     def _run_physics(self) -> None:
         world = self.world
-        steps_per_tick = max(1, int(round(1.0 / (self._state_rate * world.timestep))))
+        config = self.config
         pacer = Pacer(self._real_time_factor)
+        # Idle (real time only: as fast as possible, simulated time would race ahead while nothing happens).
+        rest = RestWatch(config.idle_after if self._real_time_factor > 0 else 0.0)
         next_objects = next_camera = world.time
         last_state_wall = last_objects_wall = -math.inf
+        idle_frames: list[tuple[Any, ...]] | None = None  # the camera messages rendered when idling began
         try:
             while not self._stop.is_set():
+                if self._woken.is_set():
+                    self._woken.clear()
+                    rest.wake()
+                idle = rest.update(world.time, self._goals_running > 0, world.max_speed())
+                state_rate = config.idle_state_rate if idle else self._state_rate
+                steps = max(1, int(round(1.0 / (state_rate * world.timestep))))
                 wall = time.monotonic()
                 publish_state = wall - last_state_wall >= 1.0 / MAX_WALL_STATE_RATE
+                objects_rate = config.idle_objects_rate if idle else self._objects_rate
                 with world.lock:
-                    world.step(steps_per_tick)
+                    world.step(steps)
                     now = world.time
                     joints = conv.joint_state_msg(
                         now, ARM_JOINT_NAMES + GRIPPER_JOINT_NAMES,
                         np.concatenate([world.joint_positions(), world.finger_positions()]),
                         np.concatenate([world.joint_velocities(), world.finger_velocities()]),
                         np.concatenate([world.joint_efforts(), np.zeros(2)])) if publish_state else None
-                    objects = world.object_states() if now >= next_objects and \
+                    objects = world.object_states() if now >= next_objects and objects_rate > 0 and \
                         wall - last_objects_wall >= 1.0 / MAX_WALL_OBJECTS_RATE else None
                 if joints is not None:
                     self._clock_pub.publish(Clock(clock=time_msg(now)))
@@ -151,18 +173,25 @@ class SimBridgeNode(Node):
                 if objects is not None:
                     self._objects_pub.publish(ObjectArray(header=conv.header(now),
                                                           objects=[conv.object_state_msg(s) for s in objects]))
-                    next_objects = max(next_objects + 1.0 / self._objects_rate, now)
+                    next_objects = max(next_objects + 1.0 / objects_rate, now)
                     last_objects_wall = wall
-                if self._camera_rate > 0 and self._cameras and now >= next_camera:
-                    self._publish_images(now)
-                    next_camera = max(next_camera + 1.0 / self._camera_rate, now)
+                camera_rate = config.idle_camera_rate if idle else self._camera_rate
+                if not idle:
+                    idle_frames = None
+                if camera_rate > 0 and self._camera_rate > 0 and self._cameras and now >= next_camera:
+                    if idle:  # nothing in view moves: render once, then send that frame with new stamps
+                        idle_frames = idle_frames or self._render_frames(now)
+                        self._send_frames(idle_frames, now)
+                    else:
+                        self._send_frames(self._render_frames(now), now)
+                    next_camera = max(next_camera + 1.0 / camera_rate, now)
                 if self._scene_reset.is_set():
                     # A reset simulates the settling at once: pace from here rather than wait for the wall clock.
                     self._scene_reset.clear()
                     pacer.restart()
                 delay = pacer.delay(now)
                 if delay > 0:
-                    self._stop.wait(delay)
+                    self._woken.wait(delay)  # a goal that arrives ends the wait (and the idling)
                 else:
                     time.sleep(0)  # let callbacks waiting for world.lock in
         except Exception as error:  # noqa: BLE001 - a dead physics thread must say why
@@ -173,16 +202,25 @@ class SimBridgeNode(Node):
         finally:
             world.close()
 
-    def _publish_images(self, now: float) -> None:
+    def _render_frames(self, now: float) -> list[tuple[Any, ...]]:
+        """(publishers, colour, depth or None, camera_info) of every camera, rendered now."""
         width, height = self._image_width, self._image_height
+        frames = []
         for camera in self._cameras:
             rgb, depth = self.world.render(camera, width, height, with_depth=self._publish_depth)
-            publishers = self._camera_pubs[camera]
-            publishers['color'].publish(conv.color_image_msg(now, camera, rgb))
-            if depth is not None:
-                publishers['depth'].publish(conv.depth_image_msg(now, camera, depth))
-            publishers['camera_info'].publish(
-                conv.camera_info_msg(now, camera, self.world.camera_intrinsics(camera, width, height)))
+            frames.append((self._camera_pubs[camera], conv.color_image_msg(now, camera, rgb),
+                           conv.depth_image_msg(now, camera, depth) if depth is not None else None,
+                           conv.camera_info_msg(now, camera, self.world.camera_intrinsics(camera, width, height))))
+        return frames
+
+    @staticmethod
+    def _send_frames(frames: list[tuple[Any, ...]], now: float) -> None:
+        stamp = time_msg(now)
+        for publishers, color, depth, info in frames:
+            for kind, message in (('color', color), ('depth', depth), ('camera_info', info)):
+                if message is not None:
+                    message.header.stamp = stamp
+                    publishers[kind].publish(message)
 
     def _publish_scene(self) -> None:
         """Ground truth and camera poses now (after start and after every reset)."""
@@ -204,6 +242,7 @@ class SimBridgeNode(Node):
             specs = [conv.object_spec(o) for o in request.objects]
             states = self.world.reset(request.seed, specs or None)
             self._scene_reset.set()
+            self._woken.set()
         except ValueError as error:
             response.success = False
             response.message = str(error)
@@ -214,6 +253,19 @@ class SimBridgeNode(Node):
             ', '.join(s.name for s in states)
         response.objects = [conv.object_state_msg(s) for s in states]
         return response
+
+    # ------------------------------------------------------------------------------------------- goals
+    def _while_running(self, execute, goal_handle):
+        """Run a goal's execute callback; the world is not idle meanwhile (nor for idle_after afterwards)."""
+        with self._goals_lock:
+            self._goals_running += 1
+        self._woken.set()
+        try:
+            return execute(goal_handle)
+        finally:
+            with self._goals_lock:
+                self._goals_running -= 1
+            self._woken.set()
 
     # ---------------------------------------------------------------------------------------- trajectory
     def _execute_trajectory(self, goal_handle) -> FollowJointTrajectory.Result:

@@ -25,6 +25,12 @@ class SimBridgeConfig:
     state_rate: float = parameter(100.0, 'Rate of /clock and /joint_states [Hz of simulated time].')
     objects_rate: float = parameter(10.0, 'Rate of the ground-truth object array [Hz of simulated time].')
     camera_rate: float = parameter(10.0, 'Rate of camera images [Hz of simulated time]; 0 = no images.')
+    idle_after: float = parameter(1.0, 'With real_time: after this long [s of simulated time] with no goal running '
+                                       'and nothing moving, publish at the idle rates below; 0 = never.')
+    idle_state_rate: float = parameter(5.0, 'Rate of /clock and /joint_states while idle [Hz].')
+    idle_objects_rate: float = parameter(1.0, 'Rate of the ground-truth object array while idle [Hz].')
+    idle_camera_rate: float = parameter(1.0, 'Rate of camera images while idle [Hz]: the frame rendered when the '
+                                             'world came to rest, stamped anew (nothing in view moves).')
     cameras: tuple[str, ...] = parameter(DEFAULT_CAMERAS, 'Cameras to publish; left at the default, the cameras of '
                                                           'the scene.')
     image_width: int = parameter(640, 'Width of the published images [pixels].')

@@ -401,6 +401,11 @@ class TabletopWorld:
                 speeds[name] = float(np.linalg.norm(self.data.qvel[adr:adr + 3]))
             return speeds
 
+    def max_speed(self) -> float:
+        """The largest joint speed of the whole model, arm, fingers and objects [m/s or rad/s] (is it still?)."""
+        with self.lock:
+            return float(np.max(np.abs(self.data.qvel))) if self.model.nv else 0.0
+
     def deepest_object_penetration(self) -> tuple[float, str, str]:
         """(depth [m], geom, geom) of the deepest overlap of an object with the table or another object.
 
