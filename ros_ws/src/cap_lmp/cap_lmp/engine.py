@@ -85,6 +85,10 @@ class LMPConfig:
     # Of the function-generation LMP: how a missing function is asked for, 'call' (as the program called it, the
     # paper's queries) or 'parameters' (parameter names in place of the call's values; see functions.UndefinedCall).
     signature_style: str = 'call'
+    # The domain's own check of an answer before it runs: (program's AST, query, context line) -> a reason the
+    # answer cannot be meant (e.g. it names an object that is neither in the scene nor in the command) or None.
+    # A reason makes the answer unusable: asked for again (Engine's regenerations), else the command fails.
+    check_answer: Callable[[ast.Module, str, str], str | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -350,12 +354,16 @@ class Engine:
             code = config.prepare_source(code)
         return drop_provided_imports(code, known)
 
-    def _prepare(self, config: LMPConfig, code: str, context: str = '',
-                 variables: Iterable[str] = ()) -> PreparedCode:
+    def _prepare(self, config: LMPConfig, code: str, context: str = '', variables: Iterable[str] = (),
+                 query: str = '') -> PreparedCode:
         known = self._known_names()
         code = self._source(config, code, known)
         tree = self.sandbox.check(code)
         self._check_names(config, tree, code, known | self._context_names(config, context) | set(variables))
+        if config.check_answer is not None:
+            reason = config.check_answer(tree, query, context)
+            if reason:
+                raise UnusableAnswer(f'the generated code was not run: {reason}')
         functions: list[tuple[str, CompiledProgram]] = []
         if config.generate_functions:
             self._define_missing(tree, known, (), functions)
@@ -439,7 +447,7 @@ class Engine:
                 code = f'{config.query_prefix}{query}{config.query_suffix}{code}'
                 check_program_size(code, 'the query with the answer')
             try:
-                return self._prepare(config, code, context, variables)
+                return self._prepare(config, code, context, variables, query)
             except (CodeRejected, GenerationError) as error:
                 if attempt >= self.regenerations or not _worth_asking_again(error):
                     raise

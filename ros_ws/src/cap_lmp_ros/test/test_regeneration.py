@@ -105,3 +105,27 @@ def test_variables_passed_to_an_lmp_and_its_context_are_defined(server, table):
     result = make_engine(server, table).run('make the square bigger')
     assert result.success, result.message
     assert table.said == ['4 4']
+
+
+def test_an_object_the_model_made_up_is_asked_for_again_before_anything_moves(server, table):
+    server.responder = by_attempt({'put the red block and the blue block in the blue bowl': (
+        "put_first_on_second('red block', 'blue bowl')\nput_first_on_second('green block', 'blue bowl')",
+        "put_first_on_second('red block', 'blue bowl')\nput_first_on_second('blue block', 'blue bowl')")})
+    engine = make_engine(server, table, regenerations=1)
+    result = engine.run('put the red block and the blue block in the blue bowl')
+    assert result.success, result.message
+    assert table.moves == [('red block', 'blue bowl'), ('blue block', 'blue bowl')]  # the first answer never ran
+
+    server.responder = None
+    server.answers['put the blue block on the red block'] = "put_first_on_second('green block', 'red block')"
+    made_up = engine.run('put the blue block on the red block')
+    assert made_up.outcome is Outcome.MODEL_ERROR and 'names the green block, which is neither on the table' in \
+        made_up.message
+    assert len(table.moves) == 2
+
+
+def test_an_object_the_command_names_is_the_users_and_the_program_runs(server, table):
+    server.answers['put the purple block in the red bowl'] = "put_first_on_second('purple block', 'red bowl')"
+    result = make_engine(server, table, regenerations=1).run('put the purple block in the red bowl')
+    assert result.outcome is Outcome.ERROR and "no object called 'purple block'" in result.message
+    assert len(server.requests) == 1

@@ -17,6 +17,7 @@ from cap_lmp.engine import Engine, LMPConfig
 from cap_lmp.llm import LLMClient
 from cap_lmp.prompts import load_prompt
 from cap_lmp.sandbox import SandboxLimits
+from cap_lmp_ros.domains.tabletop.answer_check import invented_object
 from cap_tabletop.workspace import CORNERS, MIDDLE, NORMALISED_ORIGIN, NORMALISED_SPAN, SIDES
 
 PROMPTS_DIR = Path(__file__).resolve().parent / 'prompts'
@@ -62,9 +63,9 @@ def tabletop_lmp_configs() -> list[LMPConfig]:
     parse_stop = ('#', 'objects = [')
     return [
         LMPConfig('tabletop_ui', load_prompt(PROMPTS_DIR, 'tabletop_ui'), stop=parse_stop, maintain_session=True,
-                  context_var='objects', context_api='get_obj_names'),
+                  context_var='objects', context_api='get_obj_names', check_answer=invented_object),
         LMPConfig('parse_obj_name', load_prompt(PROMPTS_DIR, 'parse_obj_name'), stop=parse_stop, has_return=True,
-                  callable_from_code=True),
+                  callable_from_code=True, check_answer=invented_object),
         LMPConfig('parse_position', load_prompt(PROMPTS_DIR, 'parse_position'), stop=('#',), has_return=True,
                   callable_from_code=True),
         LMPConfig('parse_question', load_prompt(PROMPTS_DIR, 'parse_question'), stop=parse_stop, has_return=True,
