@@ -37,9 +37,10 @@ class LmpNodeConfig:
                           'sockets, exec or new processes): required (the node does not start without it), '
                           'best_effort (what the kernel offers, the rest logged) or off.')
     model_time_limit_s: float = parameter(120.0, 'Overall model time per command [s].')
-    regenerations: int = parameter(2, 'How often an answer that cannot run at all (a syntax error, a name nothing '
-                                   'defines) is asked for again, sampled, before the command fails; 0: never. Found '
-                                   'before the code runs, so a half-done command is never repeated.')
+    regenerations: int = parameter(2, 'How often an answer that cannot be run (a syntax error, a name nothing '
+                                   'defines, an object neither on the table nor in the command) is asked for again, '
+                                   'sampled, before the command fails; 0: never. Found before the code runs, so a '
+                                   'half-done command is never repeated.')
     model_file: str = parameter('', 'With llm_backend=local: the GGUF model file; empty: CAP_MODEL_FILE, else the '
                                 'default model `make model` installs.')
     model_threads: int = parameter(1, 'With llm_backend=local: CPU threads of the model server (1 keeps a core for '
