@@ -115,12 +115,15 @@ def _model_request(fields: Any) -> CompletionRequest:
         raise ValueError('malformed max_tokens')
     if not isinstance(temperature, (int, float)) or isinstance(temperature, bool) or not 0 <= temperature <= 2:
         raise ValueError('malformed temperature')
+    seed = fields.get('seed')
+    if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < 2 ** 31):
+        raise ValueError('malformed seed')
     budget = fields.get('time_budget_s')
     if budget is not None and (not isinstance(budget, (int, float)) or isinstance(budget, bool) or budget != budget):
         raise ValueError('malformed time budget')
     return CompletionRequest(lmp=texts['lmp'][:200], prompt=texts['prompt'], query=texts['query'],
                              context=texts['context'], stop=tuple(stop), max_tokens=max_tokens,
-                             temperature=float(temperature), time_budget_s=budget)
+                             temperature=float(temperature), seed=seed, time_budget_s=budget)
 
 
 class _Clock:

@@ -129,3 +129,19 @@ def test_an_object_the_command_names_is_the_users_and_the_program_runs(server, t
     result = make_engine(server, table, regenerations=1).run('put the purple block in the red bowl')
     assert result.outcome is Outcome.ERROR and "no object called 'purple block'" in result.message
     assert len(server.requests) == 1
+
+
+def test_in_the_sandbox_process_the_second_answer_is_sampled_with_its_seed(server, table):
+    from cap_lmp.isolated_engine import IsolatedEngine
+    server.responder = by_attempt({'put the red block in its bowl': (
+        "put_first_on_second('red block', red_bowl)", "put_first_on_second('red block', 'red bowl')")})
+    client = OpenAICompatibleClient(server.base_url, 'scripted-model', api='completions', timeout_s=10.0)
+    engine = IsolatedEngine(build_engine, table.api(), client, SandboxLimits(time_limit_s=10.0),
+                            engine_options={'regenerations': 1})
+    try:
+        result = engine.run('put the red block in its bowl')
+    finally:
+        engine.close()
+    assert result.success, result.message
+    assert [request.body.get('seed') for request in server.requests] == [None, 1]
+    assert table.moves == [('red block', 'red bowl')]
