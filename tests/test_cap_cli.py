@@ -79,11 +79,23 @@ def cli_graph(ros_isolation, tmp_path):
     cassette = write_cli_cassette(tmp_path / 'cli.yaml')
     graph = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'up', '--fast', '--cassette', str(cassette)],
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=os.environ.copy())
+    lines: queue.Queue = queue.Queue()
+    reader = threading.Thread(target=_lines, args=(graph.stdout, lines), daemon=True)
+    reader.start()
+    seen: list[str] = []
     try:
+        # The tests time their commands (--timeout): they start once the graph says it is up, not while it loads.
+        assert _wait_for_line(lines, seen, 'cap-ros is up', 120), ''.join(seen)
         yield graph
     finally:
         graph.send_signal(signal.SIGINT)
-        output, _ = graph.communicate(timeout=30)
+        graph.wait(timeout=30)
+        reader.join(timeout=10)
+    while not lines.empty():
+        line = lines.get()
+        if line is not None:
+            seen.append(line)
+    output = ''.join(seen)
     assert graph.returncode == 0, output
     assert 'Traceback' not in output and 'never retrieved' not in output, output
 
