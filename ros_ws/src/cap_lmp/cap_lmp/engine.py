@@ -152,6 +152,11 @@ def _worth_asking_again(error: Exception) -> bool:
     """An answer that cannot run (another sample may), not one the sandbox refused on purpose (final)."""
     if isinstance(error, (UndefinedName, UnusableAnswer)):
         return True
+    return _is_syntax_error(error)
+
+
+def _is_syntax_error(error: Exception) -> bool:
+    """The sandbox's check reports code that is not Python as a CodeRejected saying 'syntax error'."""
     return isinstance(error, CodeRejected) and 'syntax error' in str(error)
 
 
@@ -392,9 +397,7 @@ class Engine:
             first = unbound[0]
             lines = code.splitlines()
             text = lines[first.line - 1].strip() if 0 < first.line <= len(lines) else None
-            origin = 'the generated program' if config.name == self.default_lmp else \
-                f'the generated {config.name} program'
-            raise UndefinedName(first.name, first.line, text, origin)
+            raise UndefinedName(first.name, first.line, text, self._origin_text(config.name))
 
     def _define_missing(self, tree: Any, known: set[str], chain: tuple[str, ...],
                         out: list[tuple[str, CompiledProgram]]) -> None:
@@ -589,7 +592,7 @@ class Engine:
             line, source_line = error.line, error.source_line
             result.message = str(error)
         elif isinstance(error, CodeRejected):
-            result.error_type = 'SyntaxError' if 'syntax error' in str(error) else 'CodeRejected'
+            result.error_type = 'SyntaxError' if _is_syntax_error(error) else 'CodeRejected'
             line, source_line = error.line, error.source_line
             result.message = f'the generated code was refused: {error}'
         elif isinstance(error, CapLLMError):
@@ -608,6 +611,14 @@ class Engine:
         result.error_line = line
         result.error_source = source_line
 
+    def _origin_text(self, origin: str) -> str:
+        """How a message names a program: the top-level one, an LMP's, or a generated function."""
+        if origin == self.default_lmp:
+            return 'the generated program'
+        if origin in self.lmps:
+            return f'the generated {origin} program'
+        return f'the generated {origin}'
+
     def _locate(self, error: BaseException) -> tuple[int | None, str | None, str]:
         """Line of generated code where the error arose: the innermost frame that belongs to a generated program."""
         found: tuple[int | None, str | None, str] = (None, None, '')
@@ -620,12 +631,7 @@ class Engine:
                 continue
             lines = program.source.splitlines()
             text = lines[line - 1].strip() if 0 < line <= len(lines) else None
-            if program.origin == self.default_lmp:
-                origin = 'the generated program'
-            elif program.origin in self.lmps:
-                origin = f'the generated {program.origin} program'
-            else:
-                origin = f'the generated {program.origin}'
+            origin = self._origin_text(program.origin)
             found = (line, text, origin)
         return found
 

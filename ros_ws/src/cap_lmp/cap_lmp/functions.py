@@ -6,6 +6,8 @@ import keyword as keyword_module
 from dataclasses import dataclass
 from typing import AbstractSet
 
+from cap_lmp.unbound import bound_names
+
 
 @dataclass(frozen=True)
 class UndefinedCall:
@@ -75,37 +77,19 @@ def top_level_functions(tree: ast.Module) -> list[str]:
 def undefined_calls(tree: ast.AST, known: AbstractSet[str]) -> list[UndefinedCall]:
     """Called bare names that neither `known` (the scope) nor the code itself defines, in source order.
 
-    The code defines a name by any binding anywhere in it: a def, a parameter, an assignment, loop or comprehension
-    target, `except ... as`, a match capture. One walk over the tree collects bindings and calls.
+    The code defines a name by any binding anywhere in it (unbound.bound_names: a def, a parameter, an assignment,
+    loop or comprehension target, `except ... as`, a match capture, ...).
     """
-    local: set[str] = set()
+    local = bound_names(tree)
     calls: list[ast.Call] = []
     assigned_calls: dict[int, ast.expr] = {}
     for node in ast.walk(tree):
-        if isinstance(node, ast.Name):
-            if not isinstance(node.ctx, ast.Load):
-                local.add(node.id)
-        elif isinstance(node, ast.Call):
+        if isinstance(node, ast.Call):
             if isinstance(node.func, ast.Name):
                 calls.append(node)
         elif isinstance(node, ast.Assign):
             if len(node.targets) == 1 and isinstance(node.value, ast.Call):
                 assigned_calls[id(node.value)] = node.targets[0]
-        elif isinstance(node, ast.FunctionDef):
-            local.add(node.name)
-        elif isinstance(node, ast.arg):
-            local.add(node.arg)
-        elif isinstance(node, ast.ExceptHandler):
-            if node.name:
-                local.add(node.name)
-        elif isinstance(node, (ast.MatchAs, ast.MatchStar)):
-            if node.name:
-                local.add(node.name)
-        elif isinstance(node, ast.MatchMapping):
-            if node.rest:
-                local.add(node.rest)
-        elif isinstance(node, ast.Nonlocal):
-            local.update(node.names)
     calls.sort(key=lambda call: (call.lineno, call.col_offset))
     missing: dict[str, UndefinedCall] = {}
     for call in calls:
