@@ -73,6 +73,23 @@ def _wait_for_line(lines: queue.Queue, seen: list, text: str, timeout: float) ->
     return False
 
 
+class _GraphLog:
+    """What `cap up` has printed so far, for the message of a failed assertion."""
+
+    def __init__(self, lines: queue.Queue, seen: list) -> None:
+        self._lines, self._seen = lines, seen
+
+    def text(self) -> str:
+        while not self._lines.empty():
+            line = self._lines.get()
+            if line is not None:
+                self._seen.append(line)
+        return ''.join(self._seen)
+
+    def after(self, result: subprocess.CompletedProcess) -> str:
+        return f'{result.stdout}{result.stderr}\n--- cap up printed:\n{self.text()}'
+
+
 @pytest.fixture
 def cli_graph(ros_isolation, tmp_path):
     """`cap up` with the command-line test programs (cap_bringup.testing.cli_scenes), stopped with Ctrl-C at the end."""
@@ -83,19 +100,16 @@ def cli_graph(ros_isolation, tmp_path):
     reader = threading.Thread(target=_lines, args=(graph.stdout, lines), daemon=True)
     reader.start()
     seen: list[str] = []
+    log = _GraphLog(lines, seen)
     try:
         # The tests time their commands (--timeout): they start once the graph says it is up, not while it loads.
         assert _wait_for_line(lines, seen, 'cap-ros is up', 120), ''.join(seen)
-        yield graph
+        yield log
     finally:
         graph.send_signal(signal.SIGINT)
         graph.wait(timeout=30)
         reader.join(timeout=10)
-    while not lines.empty():
-        line = lines.get()
-        if line is not None:
-            seen.append(line)
-    output = ''.join(seen)
+    output = log.text()
     assert graph.returncode == 0, output
     assert 'Traceback' not in output and 'never retrieved' not in output, output
 
@@ -105,7 +119,7 @@ def test_send_holds_its_timeout_ends_on_sigterm_and_prints_no_control_characters
     started = time.monotonic()
     late = _cap('send', ENDLESS, '--wait', '60', '--timeout', '8')
     took = time.monotonic() - started
-    assert late.returncode == 3, late.stdout + late.stderr
+    assert late.returncode == 3, cli_graph.after(late)
     assert 'timed out after 8 s (--timeout) waiting for the result; ' in late.stderr  # then: cancelled, or no answer
     assert took < 8 + 2 + 15, took  # the timeout, the cancel's grace, and a generous start of the process
 
@@ -130,7 +144,7 @@ def test_send_holds_its_timeout_ends_on_sigterm_and_prints_no_control_characters
 
     # The graph answers the next command, whose code and said line hold control characters: shown escaped.
     shown = _cap('send', CONTROL_CHARACTERS, '--wait', '60', '--timeout', '120')
-    assert shown.returncode == 0, shown.stdout + shown.stderr
+    assert shown.returncode == 0, cli_graph.after(shown)
     assert not any(ch in shown.stdout + shown.stderr for ch in '\x1b\x07\r'), repr(shown.stdout)
     assert 'robot says: \\x1b[31mred\\x1b[0m, a bell \\x07, a return \\x0d done' in shown.stdout
     assert 'say("\\x1b[31mred' in shown.stdout  # the code, as printed

@@ -43,6 +43,9 @@ from cap_tabletop.cameras import CAMERA_NAMES
 EXIT_OK, EXIT_FAILED, EXIT_UNREACHABLE, EXIT_TIMEOUT = 0, 1, 2, 3
 CANCEL_GRACE_S = 2.0  # after --timeout or a signal: how long `cap send` waits for lmp_node to accept the cancel
 SAY_DRAIN_S = 0.3  # after the result: time for the last /cap/say lines to arrive
+# Once lmp_node is found: how long `cap send` waits for it to have found this process too (see _ReplyPath)
+# before it sends anyway. lmp_node publishes its first status when it starts, so the wait ends as soon as it has.
+REPLY_PATH_WAIT_S = 10.0
 
 
 class Interrupted(BaseException):
@@ -133,6 +136,34 @@ def _error(text: str) -> None:
     _say(text, sys.stderr)
 
 
+class _ReplyPath:
+    """Whether lmp_node has discovered this process' reply readers, so that its answers can reach it.
+
+    Discovery is not symmetric. `server_is_ready()` says that this process found lmp_node's endpoints, not that
+    lmp_node found this process' reply readers; a reply sent before then is lost (Fast DDS waits 100 ms for the
+    reader, then drops the reply; rclpy's action server then keeps the goal accepted but never runs it, ros2/ros2
+    issue 1253), and `cap send` would wait for an acknowledgement that never comes. lmp_node publishes on
+    /cap/status from its start, reliably and transient-local: a reader created after the action client receives
+    that history once lmp_node's participant has matched it, and a participant matches another's readers in the
+    order they were announced, so by then it has matched the action client's reply readers as well.
+    """
+
+    def __init__(self, node) -> None:
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        from cap_interfaces.msg import GraphNames, StatusEvent
+
+        self.heard = False
+        qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._subscription = node.create_subscription(StatusEvent, GraphNames.STATUS_TOPIC, self._on_status, qos)
+
+    def _on_status(self, _status) -> None:
+        self.heard = True
+
+    def is_open(self) -> bool:
+        return self.heard
+
+
 def send(command: str, server_timeout: float, timeout: float, out=None, namespace: str = '') -> int:
     """Send one command through the /cap/execute action, print its progress and return the exit code.
 
@@ -150,6 +181,7 @@ def send(command: str, server_timeout: float, timeout: float, out=None, namespac
     deadline = time.monotonic() + timeout
     session = _Session('cap_send', namespace)
     client = ActionClient(session.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
+    reply_path = _ReplyPath(session.node)  # after the action client: see _ReplyPath
     execute_name = session.node.resolve_topic_name(GraphNames.EXECUTE_ACTION)  # e.g. /robot1/cap/execute
     session.node.create_subscription(String, GraphNames.SAY_TOPIC, lambda m: _say(f'robot says: {m.data}', out),
                                      10)
@@ -197,6 +229,8 @@ def send(command: str, server_timeout: float, timeout: float, out=None, namespac
             _error(f'error: nobody offers {execute_name}; is the graph up (cap up)? '
                    f'ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}')
             return EXIT_UNREACHABLE
+        # Not found in time is no error: a lost acknowledgement then ends the wait below with its message.
+        session.spin_until(reply_path.is_open, min(REPLY_PATH_WAIT_S, left()))
         _say(f'> {command}', out)
         goal_future = client.send_goal_async(ExecuteCommand.Goal(command=command), feedback_callback=on_feedback)
         if not session.spin_until(goal_future.done, min(server_timeout, left())):

@@ -180,8 +180,12 @@ class LmpNode(Node):
             # Loading the model and reading the prompt's long prefix take seconds: on a thread of their own, so
             # the node answers at once; commands wait for the model (LocalModelClient.complete).
             self.thread_watch.start(self._start_model, 'model_start')
-        self.get_logger().info(f'ready: domain {self.domain.name}, LLM backend {config.llm_backend}'
-                               + (f' ({cassette})' if config.llm_backend == 'cassette' else '') + f', {where}')
+        ready = (f'ready: domain {self.domain.name}, LLM backend {config.llm_backend}'
+                 + (f' ({cassette})' if config.llm_backend == 'cassette' else '') + f', {where}')
+        self.get_logger().info(terminal_text(ready))
+        # /cap/status holds an event from the start: a client that receives its history knows that this node has
+        # discovered it, and with it the client's reply readers (cap send waits for that, see cli._ReplyPath).
+        self._publish_model_state(ready)
 
     def _start_model(self) -> None:
         assert self.model_server is not None
@@ -212,6 +216,12 @@ class LmpNode(Node):
             return
         try:
             self.get_logger().info(terminal_text(message))
+        except Exception:  # the node is shutting down: nothing to tell
+            return
+        self._publish_model_state(message)
+
+    def _publish_model_state(self, message: str) -> None:
+        try:
             status = StatusEvent(stage=StatusEvent.STAGE_MODEL, message=wire_text(message))
             status.header.stamp = self.get_clock().now().to_msg()
             self._status_publisher.publish(status)
