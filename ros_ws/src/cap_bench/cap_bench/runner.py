@@ -172,6 +172,46 @@ def _wait(predicate, timeout: float) -> bool:
     return True
 
 
+def failed_record(episode: Episode, options: BenchOptions, reason: str = '') -> dict:
+    """An episode's record before it ran: not a success, with `reason`."""
+    return {'key': episode_key(episode.group, episode.template, episode.seed), 'seed': episode.seed,
+            'group': episode.group, 'template': episode.template, 'attributes': episode.attributes,
+            'instruction': episode.instruction, 'policy': options.policy, 'perception': options.perception,
+            'code': '', 'success': False, 'reason': reason, 'sim_seconds': 0.0, 'wall_seconds': 0.0,
+            'model_calls': 0, 'prompt_tokens': 0, 'completion_tokens': 0}
+
+
+def run_episodes(keys: Sequence[str], options: BenchOptions, make_runner: Callable[[], Any],
+                 write: Callable[[dict], None]) -> int:
+    """Run the episodes `keys` one after another on a graph from `make_runner()`, writing each record; return how
+    many graphs were built.
+
+    A graph that stops answering (a service or a goal without an answer in time: TimeoutError) costs its episode,
+    recorded as failed with the reason, not the rest of the run: they continue on a new graph.
+    """
+    runner = make_runner()
+    built = 1
+    try:
+        for key in keys:
+            group, template, seed = key.split('/')
+            episode = sample_episode(group, template, int(seed))
+            try:
+                record = runner.run(episode)
+            except TimeoutError as error:
+                record = failed_record(episode, options, f'the graph stopped answering ({error}); the episodes '
+                                                         'after it ran on a new graph')
+                print(f'{record["key"]}: {record["reason"]}', file=sys.stderr)
+                runner.close()
+                runner = None
+                runner = make_runner()
+                built += 1
+            write(record)
+    finally:
+        if runner is not None:
+            runner.close()
+    return built
+
+
 class _EpisodeRunner:
     """One graph (in this process) running episodes one after another."""
 
@@ -247,12 +287,7 @@ class _EpisodeRunner:
         from cap_interfaces.msg import ObjectSpec
 
         world = self.graph.world
-        record = {'key': episode_key(episode.group, episode.template, episode.seed), 'seed': episode.seed,
-                  'group': episode.group, 'template': episode.template, 'attributes': episode.attributes,
-                  'instruction': episode.instruction, 'policy': self.options.policy,
-                  'perception': self.options.perception, 'code': '', 'success': False, 'reason': '',
-                  'sim_seconds': 0.0, 'wall_seconds': 0.0, 'model_calls': 0, 'prompt_tokens': 0,
-                  'completion_tokens': 0}
+        record = failed_record(episode, self.options)
         wall_started = time.monotonic()
         request = self.ResetScene.Request(seed=episode.seed, objects=[
             ObjectSpec(name=o.name, category=o.category, color_name=o.color, use_position=True,
@@ -335,18 +370,15 @@ def _worker(index: int, keys: list[str], options: BenchOptions, cassette: str | 
     os.environ['ROS_DOMAIN_ID'] = str(options.first_domain_id + index)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     # Job i on CPU i: each job's threads share one interpreter lock (see cap_bringup.cpu_affinity).
-    runner = _EpisodeRunner(options, pathlib.Path(cassette) if cassette else None, cpu=index)
-    try:
-        with open(results, 'a', encoding='utf-8') as out:
-            for key in keys:
-                group, template, seed = key.split('/')
-                record = runner.run(sample_episode(group, template, int(seed)))
-                out.write(json.dumps(record) + '\n')
-                out.flush()
-                if progress is not None:
-                    progress.put(record['success'])
-    finally:
-        runner.close()
+    with open(results, 'a', encoding='utf-8') as out:
+        def write(record: dict) -> None:
+            out.write(json.dumps(record) + '\n')
+            out.flush()
+            if progress is not None:
+                progress.put(record['success'])
+
+        run_episodes(keys, options, lambda: _EpisodeRunner(options, pathlib.Path(cassette) if cassette else None,
+                                                           cpu=index), write)
 
 
 def load_records(out_dir: pathlib.Path) -> list[dict]:
