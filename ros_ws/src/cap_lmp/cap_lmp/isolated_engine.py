@@ -74,6 +74,18 @@ _MODEL_GRACE_S = 1.0  # a model client that overruns its time budget by this muc
 _KEPT_ENVIRONMENT = ('PATH', 'HOME', 'LANG', 'LC_ALL', 'TMPDIR')
 
 
+def _unpin(pid: int) -> None:
+    """Let the sandbox process run on every CPU. A graph pinned to one CPU (cap_bringup.cpu_affinity, as benchmark
+    jobs are) passes the pin on to its children, and the session's interpreter, which has a lock of its own and gains
+    nothing from that CPU, would then compete for it with the graph's physics loop and executor threads."""
+    if not hasattr(os, 'sched_setaffinity'):
+        return
+    try:
+        os.sched_setaffinity(pid, range(os.cpu_count() or 1))
+    except OSError:  # CPUs this process may not use (a cgroup's cpuset), or the process is gone: keep what it has
+        pass
+
+
 class _ProcessLost(Exception):
     """Internal: the sandbox process must be (or was) ended for `reason`."""
 
@@ -273,6 +285,7 @@ class IsolatedEngine:
             # A session of its own: a kill reaches whatever the process may have forked.
             self._process = subprocess.Popen([*self._child_command, *map(str, fds)], pass_fds=fds, env=env,
                                              stdin=subprocess.DEVNULL, start_new_session=True)
+        _unpin(self._process.pid)  # before it has started the threads that would inherit the pin
         data.settimeout(self.send_timeout_s)  # bounds sends; receives happen only after poll says data is there
         control.settimeout(self.send_timeout_s)
         self._data, self._control = data, control

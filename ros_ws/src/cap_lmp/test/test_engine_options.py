@@ -3,6 +3,9 @@ continues its query, a harness's source rule, an LMP that generates no functions
 given context line."""
 from __future__ import annotations
 
+import os
+import threading
+
 import pytest
 
 from cap_lmp.isolated_engine import IsolatedEngine
@@ -69,3 +72,23 @@ def test_the_sandbox_process_runs_the_lmp_and_context_it_is_given(server):
     finally:
         engine.close()
     assert reports == [8, 'blue bowl', 8]
+
+
+@pytest.mark.skipif(not hasattr(os, 'sched_setaffinity') or (os.cpu_count() or 1) < 2,
+                    reason='needs two CPUs to pin to one')
+def test_the_sandbox_process_is_not_held_to_the_cpu_its_parent_is_pinned_to(server):
+    # A benchmark graph pins its threads to one CPU; the sandbox process it starts must not stay on it.
+    box = {}
+
+    def start_pinned() -> None:  # affinity is per thread on Linux: only this thread (and its children) are pinned
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+        box['engine'] = IsolatedEngine(build_engine, {'report': print}, _client(server))
+
+    thread = threading.Thread(target=start_pinned)
+    thread.start()
+    thread.join()
+    engine = box['engine']
+    try:
+        assert len(os.sched_getaffinity(engine.pid)) >= 2
+    finally:
+        engine.close()
