@@ -52,10 +52,12 @@ def test_a_topic_command_runs_and_reports_every_stage(graph):
     graph.commands.publish(String(data='which blocks are there'))
     assert wait_for(lambda: graph.said)
     assert graph.said == ['I see red block, blue block'] or graph.said == ['I see blue block, red block']
-    # The node's own event from its start comes first (no command id): a new subscriber always finds a history.
-    assert graph.statuses[0].stage == StatusEvent.STAGE_MODEL and graph.statuses[0].command_id == ''
-    assert graph.statuses[0].message.startswith('ready: domain tabletop, LLM backend cassette')
-    command_id = next(s.command_id for s in graph.statuses if s.command_id)
+    # The node's own event from its start (no command id): a new subscriber always finds a history.
+    assert wait_for(lambda: any(s.stage == StatusEvent.STAGE_MODEL and not s.command_id
+                                and s.message.startswith('ready: domain tabletop, LLM backend cassette')
+                                for s in list(graph.statuses)))
+    assert wait_for(lambda: any(s.command_id for s in list(graph.statuses)))
+    command_id = next(s.command_id for s in list(graph.statuses) if s.command_id)
     assert wait_for(lambda: graph.final(command_id) is not None)
     assert graph.stages(command_id) == [StatusEvent.STAGE_RECEIVED, StatusEvent.STAGE_GENERATING,
                                         StatusEvent.STAGE_CODE, StatusEvent.STAGE_EXECUTING, StatusEvent.STAGE_DONE]
