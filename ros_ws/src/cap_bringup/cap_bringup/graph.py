@@ -1,4 +1,5 @@
-"""Bring up the whole table-top graph in one process: sim bridge, perception, pick-and-place and lmp_node.
+"""Bring up a domain's whole graph in one process: the sim bridge, the domain's perception and control nodes (for
+the table top: perception and pick-and-place) and lmp_node.
 
 `cap up`, the demo, the integration tests and the benchmark all start the graph as a `Graph`, so they run the same
 nodes with the same parameters (each node's defaults from its config dataclass, then its package's config/*.yaml,
@@ -32,23 +33,10 @@ from rclpy.parameter import Parameter
 
 from cap_bringup.cpu_affinity import pin_to_one_cpu
 from cap_bringup.namespaces import normalise_namespace
-from cap_control.pick_place_node import PickPlaceNode
+from cap_bringup.nodes import LMP_NODE, SIM_BRIDGE_NODE, graph_nodes, node_class
 from cap_interfaces.msg import GraphNames
 from cap_lmp_ros.domains.registry import get_domain
-from cap_lmp_ros.lmp_node import LmpNode
 from cap_lmp_ros.thread_watch import ThreadWatch
-from cap_perception.perception_node import PerceptionNode
-from cap_sim_bridge.bridge_node import SimBridgeNode
-
-# (node name, package, its config file, class), in start order: the simulator first, lmp_node last.
-NODES = (
-    ('sim_bridge', 'cap_sim_bridge', 'sim_bridge.yaml', SimBridgeNode),
-    ('perception_node', 'cap_perception', 'perception.yaml', PerceptionNode),
-    ('pick_place', 'cap_control', 'pick_place.yaml', PickPlaceNode),
-    ('lmp_node', 'cap_lmp_ros', 'lmp_node.yaml', LmpNode),
-)
-# Nodes that take their time from the simulator's /clock (the simulator itself keeps the wall clock it paces by).
-SIM_TIME_NODES = ('perception_node', 'pick_place', 'lmp_node')
 
 
 def namespace_arguments(namespace: str) -> dict[str, Any]:
@@ -92,19 +80,24 @@ class GraphOptions:
     domain: str = 'tabletop'  # the domain (cap_lmp_ros.domains) whose prompts, robot API and scene run
 
     def overrides(self) -> dict[str, dict[str, Any]]:
+        """{node name: {parameter: value}} for the nodes of the domain's graph."""
+        domain = get_domain(self.domain)
         lmp = {'llm_backend': self.llm_backend, 'record_cassette': self.record_cassette, 'domain': self.domain}
         if self.cassette:
             lmp['cassette'] = str(pathlib.Path(self.cassette).resolve())
-        values = {
+        chosen = {
             'sim_bridge': {'seed': self.seed, 'objects': self.objects, 'real_time': self.real_time,
-                           'camera_rate': self.camera_rate, 'scene': get_domain(self.domain).scene},
+                           'camera_rate': self.camera_rate, 'scene': domain.scene},
             'perception_node': {'source': self.perception},
             # A camera sees a fresh stack only once the tool has moved out of its line of sight.
             'pick_place': {'clear_view': self.perception == 'rgbd'},
             'lmp_node': lmp,
         }
-        for node in SIM_TIME_NODES:
-            values[node]['use_sim_time'] = True
+        values: dict[str, dict[str, Any]] = {}
+        for spec in graph_nodes(domain):
+            values[spec.name] = dict(chosen.get(spec.name, {}))
+            if spec is not SIM_BRIDGE_NODE:
+                values[spec.name]['use_sim_time'] = True
         for node, parameters in self.extra.items():
             values.setdefault(node, {}).update(parameters)
         return values
@@ -278,18 +271,19 @@ class Graph:
                           Spinner(EventsExecutor(context=context), context, 'graph_events_executor', self._watch)]
         quick = self._spinners[1].executor
         self.api_node = None  # the robot API's clients, on the events executor
-        self.control_clients_node = None  # pick-and-place's perception clients, on the events executor
+        self.client_nodes: list[Any] = []  # nodes holding other nodes' perception clients, on the events executor
         try:
-            for node_name, package, config_file, node_class in NODES:
-                from_config = config_parameters(package, config_file)
-                values = {**from_config.get('/**', {}), **from_config.get(node_name, {}),
-                          **overrides.get(node_name, {})}
+            self.domain = get_domain(options.domain)
+            for spec in graph_nodes(self.domain):
+                from_config = config_parameters(spec.package, spec.config_file)
+                values = {**from_config.get('/**', {}), **from_config.get(spec.name, {}),
+                          **overrides.get(spec.name, {})}
                 # lmp_node's worker thread reports its death to the graph's watch, like the executors' threads.
-                watched = {'thread_watch': self._watch} if node_name == 'lmp_node' else {}
-                node = node_class(context=context, parameter_overrides=[
+                watched = {'thread_watch': self._watch} if spec is LMP_NODE else {}
+                node = node_class(spec)(context=context, parameter_overrides=[
                     Parameter(name, value=value) for name, value in values.items()], **placed, **watched)
-                self.nodes[node_name] = node
-                (quick if is_quick(node_name, values) else self.executor).add_node(node)
+                self.nodes[spec.name] = node
+                (quick if is_quick(spec.name, values) else self.executor).add_node(node)
             # Perception's answers reach every client of its services in the process, waking each client's
             # executor: all of them live on the events executor, where a wake-up for another client is cheap.
             sim_time = [Parameter('use_sim_time', value=True)]
@@ -299,10 +293,17 @@ class Graph:
             bind_clients = getattr(self.nodes['lmp_node'].robot, 'bind_clients', None)
             if bind_clients is not None:  # a domain's binding may keep its clients on lmp_node itself
                 bind_clients(self.api_node)
-            self.control_clients_node = rclpy.create_node('pick_place_perception_clients', context=context,
-                                                          parameter_overrides=sim_time, **placed)
-            quick.add_node(self.control_clients_node)
-            self.nodes['pick_place'].bind_perception_clients(self.control_clients_node)
+            # A control node that asks perception (pick-and-place) moves those clients onto a node of the events
+            # executor, for the same reason.
+            for name, node in self.nodes.items():
+                bind_perception = getattr(node, 'bind_perception_clients', None)
+                if bind_perception is None:
+                    continue
+                clients = rclpy.create_node(f'{name}_perception_clients', context=context,
+                                            parameter_overrides=sim_time, **placed)
+                self.client_nodes.append(clients)
+                quick.add_node(clients)
+                bind_perception(clients)
         except BaseException:
             self.close()
             raise
@@ -354,8 +355,7 @@ class Graph:
             time.sleep(0.01)
 
     def _destroy_nodes(self) -> None:
-        nodes = list(self.nodes.values()) + [node for node in (self.control_clients_node, self.api_node)
-                                             if node is not None]
+        nodes = list(self.nodes.values()) + self.client_nodes + ([self.api_node] if self.api_node is not None else [])
         for node in reversed(nodes):
             try:
                 node.destroy_node()

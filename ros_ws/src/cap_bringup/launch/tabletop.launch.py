@@ -1,4 +1,5 @@
-"""The table-top graph as four processes, for a regular ROS 2 Jazzy install (`ros2 launch` of this file).
+"""A domain's graph as one process per node, for a regular ROS 2 Jazzy install (`ros2 launch` of this file); the
+table top by default (four processes: simulator, perception, pick-and-place, lmp_node).
 
     ros2 launch cap_bringup tabletop.launch.py                       # simulator in real time, reference cassette
     ros2 launch cap_bringup tabletop.launch.py namespace:=robot1     # every name under /robot1
@@ -17,6 +18,7 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from cap_bringup.nodes import SIM_BRIDGE_NODE, graph_nodes
 from cap_bringup.namespaces import normalise_namespace
 from cap_lmp_ros.domains.registry import get_domain
 
@@ -40,28 +42,25 @@ def _nodes(context):
     value = {name: LaunchConfiguration(name).perform(context).strip() for name, _ in ARGUMENTS}
     namespace = normalise_namespace(value['namespace'])
     common = {'namespace': namespace, 'remappings': [('/clock', f'{namespace}/clock')], 'output': 'screen'}
-    sim_time = {'use_sim_time': True}
-    sim: dict = {}
+    domain = get_domain(value['domain'] or 'tabletop')
+    chosen: dict[str, dict] = {name: {} for name in ('sim_bridge', 'perception_node', 'pick_place', 'lmp_node')}
     if value['seed']:
-        sim['seed'] = int(value['seed'])
+        chosen['sim_bridge']['seed'] = int(value['seed'])
     if value['objects']:
-        sim['objects'] = value['objects']
-    perception: dict = {'source': value['perception']} if value['perception'] else {}
-    control: dict = {'clear_view': value['perception'] == 'rgbd'} if value['perception'] else {}
-    lmp: dict = {'llm_backend': value['llm_backend']} if value['llm_backend'] else {}
+        chosen['sim_bridge']['objects'] = value['objects']
+    if value['perception']:
+        chosen['perception_node']['source'] = value['perception']
+        chosen['pick_place']['clear_view'] = value['perception'] == 'rgbd'
+    if value['llm_backend']:
+        chosen['lmp_node']['llm_backend'] = value['llm_backend']
     if value['domain']:
-        lmp['domain'] = value['domain']
-        sim['scene'] = get_domain(value['domain']).scene  # the domain brings its scene, as in `cap up --domain`
-    return [
-        Node(package='cap_sim_bridge', executable='sim_bridge', name='sim_bridge',
-             parameters=[_config('cap_sim_bridge', 'sim_bridge.yaml'), sim], **common),
-        Node(package='cap_perception', executable='perception_node', name='perception_node',
-             parameters=[_config('cap_perception', 'perception.yaml'), perception, sim_time], **common),
-        Node(package='cap_control', executable='pick_place', name='pick_place',
-             parameters=[_config('cap_control', 'pick_place.yaml'), control, sim_time], **common),
-        Node(package='cap_lmp_ros', executable='lmp_node', name='lmp_node',
-             parameters=[_config('cap_lmp_ros', 'lmp_node.yaml'), lmp, sim_time], **common),
-    ]
+        chosen['lmp_node']['domain'] = value['domain']
+        chosen['sim_bridge']['scene'] = domain.scene  # the domain brings its scene, as in `cap up --domain`
+    # The simulator, the domain's perception and control nodes, lmp_node: the nodes of `cap up`'s graph.
+    return [Node(package=spec.package, executable=spec.executable, name=spec.name,
+                 parameters=[_config(spec.package, spec.config_file), chosen.get(spec.name, {})]
+                 + ([] if spec is SIM_BRIDGE_NODE else [{'use_sim_time': True}]), **common)
+            for spec in graph_nodes(domain)]
 
 
 def generate_launch_description() -> LaunchDescription:

@@ -1,34 +1,21 @@
 """The launch files name executables and config files that the workspace really installs.
 
-ROS 2's launch packages are not on PyPI, so the files are not run here; this reads them and checks every node they
-start against the packages' entry points and config folders.
+ROS 2's launch packages are not on PyPI, so the files are not run here; the launch file starts the nodes of the
+domain's graph (cap_bringup.nodes.graph_nodes), and this checks every such node of every domain against the
+packages' entry points, config folders and modules.
 """
 from __future__ import annotations
 
-import ast
 import pathlib
 import re
 
 import pytest
 
+from cap_bringup.nodes import graph_nodes
+from cap_lmp_ros.domains.registry import domain_names, get_domain
+
 SRC = pathlib.Path(__file__).resolve().parents[2]
 LAUNCH_FILES = sorted((SRC / 'cap_bringup' / 'launch').glob('*.launch.py'))
-
-
-def _keywords(call: ast.Call) -> dict[str, object]:
-    return {k.arg: k.value.value for k in call.keywords if isinstance(k.value, ast.Constant)}
-
-
-def _nodes(path: pathlib.Path) -> list[dict[str, object]]:
-    tree = ast.parse(path.read_text(encoding='utf-8'))
-    return [_keywords(node) for node in ast.walk(tree)
-            if isinstance(node, ast.Call) and getattr(node.func, 'id', None) == 'Node']
-
-
-def _configs(path: pathlib.Path) -> list[tuple[str, str]]:
-    tree = ast.parse(path.read_text(encoding='utf-8'))
-    return [(node.args[0].value, node.args[1].value) for node in ast.walk(tree)
-            if isinstance(node, ast.Call) and getattr(node.func, 'id', None) == '_config']
 
 
 def _console_scripts(package: str) -> set[str]:
@@ -40,13 +27,27 @@ def test_there_is_a_launch_file():
     assert [path.name for path in LAUNCH_FILES] == ['tabletop.launch.py']
 
 
+@pytest.mark.parametrize('domain', domain_names())
+def test_every_node_of_every_domain_is_an_installed_executable_with_its_config(domain):
+    """The launch file starts graph_nodes(domain) by executable and config file; cap up builds node_class."""
+    nodes = graph_nodes(get_domain(domain))
+    assert nodes[0].name == 'sim_bridge' and nodes[-1].name == 'lmp_node'
+    for spec in nodes:
+        assert spec.executable in _console_scripts(spec.package), spec
+        assert (SRC / spec.package / 'config' / spec.config_file).is_file(), spec
+        module, _, name = spec.node_class.partition(':')
+        assert spec.package == module.split('.')[0], spec
+        assert f'class {name}(' in (SRC / spec.package / (module.replace('.', '/') + '.py')).read_text(), spec
+
+
+def test_the_table_top_runs_perception_and_pick_and_place():
+    assert [spec.name for spec in graph_nodes(get_domain('tabletop'))] == [
+        'sim_bridge', 'perception_node', 'pick_place', 'lmp_node']
+
+
 @pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda path: path.name)
-def test_every_node_is_an_installed_executable_with_its_config(path):
-    nodes = _nodes(path)
-    assert {node['package'] for node in nodes} == {'cap_sim_bridge', 'cap_perception', 'cap_control', 'cap_lmp_ros'}
-    for node in nodes:
-        assert node['executable'] in _console_scripts(node['package']), node
-    for package, filename in _configs(path):
-        assert (SRC / package / 'config' / filename).is_file(), (package, filename)
+def test_the_launch_file_starts_the_domain_nodes_and_is_installed(path):
+    text = path.read_text(encoding='utf-8')
+    assert 'graph_nodes(domain)' in text and 'spec.executable' in text and 'spec.config_file' in text
     assert "('share/' + package_name + '/launch', glob('launch/*.launch.py'))" in (
         SRC / 'cap_bringup' / 'setup.py').read_text(encoding='utf-8')

@@ -49,9 +49,33 @@ RobotApiFactory = Callable[[Any, Any, float, float], RobotBinding]
 
 
 @dataclass(frozen=True)
+class NodeSpec:
+    """A node a domain's graph runs between the simulator and lmp_node (perception, a control node).
+
+    Named by strings, so that a domain is described without importing its nodes (nor rclpy): `node_class`
+    ('module:Class') is what the one-process graph builds, `executable` what a launch file starts, and
+    `config_file` the parameter file in the package's share/config folder.
+    """
+
+    name: str
+    package: str
+    executable: str
+    node_class: str
+    config_file: str
+
+
+# The nodes of the table top, which other domains reuse: perception of the objects, and pick-and-place.
+PERCEPTION_NODE = NodeSpec('perception_node', 'cap_perception', 'perception_node',
+                           'cap_perception.perception_node:PerceptionNode', 'perception.yaml')
+PICK_PLACE_NODE = NodeSpec('pick_place', 'cap_control', 'pick_place', 'cap_control.pick_place_node:PickPlaceNode',
+                           'pick_place.yaml')
+
+
+@dataclass(frozen=True)
 class Domain:
     """One robot domain. `robot_functions` are the names `robot_api(...).functions()` binds over ROS; `scene` names
-    the simulator scene it runs in; `cassette` is the replay cassette used when none is configured."""
+    the simulator scene it runs in; `cassette` is the replay cassette used when none is configured; `nodes` are the
+    perception and control nodes its robot API talks to, started between the simulator and lmp_node."""
 
     name: str
     build_engine: EngineBuilder
@@ -59,9 +83,14 @@ class Domain:
     robot_api: RobotApiFactory
     scene: str
     cassette: Path
+    nodes: tuple[NodeSpec, ...] = (PERCEPTION_NODE,)
 
     def __post_init__(self) -> None:
         builder_reference(self.build_engine)  # a one-line ValueError now, not when the sandbox process starts
+        names = [node.name for node in self.nodes]
+        if len(set(names)) != len(names) or {'sim_bridge', 'lmp_node'} & set(names):
+            raise ValueError(f'domain {self.name!r}: node names must be unique and not sim_bridge or lmp_node: '
+                             f'{names}')
 
 
 # Other packages offer domains as entry points of this group (value: a Domain), found in every process.
@@ -145,5 +174,6 @@ def unregister_domain(name: str) -> None:
         _domains.pop(name, None)
 
 
-__all__ = ['Domain', 'ENTRY_POINT_GROUP', 'EngineBuilder', 'RobotApiFactory', 'RobotBinding', 'domain_names',
-           'engine_api', 'get_domain', 'register_domain', 'unregister_domain']
+__all__ = ['Domain', 'ENTRY_POINT_GROUP', 'EngineBuilder', 'NodeSpec', 'PERCEPTION_NODE', 'PICK_PLACE_NODE',
+           'RobotApiFactory', 'RobotBinding', 'domain_names', 'engine_api', 'get_domain', 'register_domain',
+           'unregister_domain']

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from cap_lmp_ros.domains.registry import Domain, RobotBinding
+from cap_lmp_ros.domains.registry import PERCEPTION_NODE, PICK_PLACE_NODE, Domain, RobotBinding
 from cap_lmp_ros.domains.tabletop.lmps import build_engine
 
 # The names RosTabletopApi binds over ROS; the pure helpers (denormalize_xy, ...) are added by build_engine.
@@ -22,4 +22,5 @@ def robot_api(node: Any, say_publisher: Any, service_timeout_s: float, motion_ti
 
 DOMAIN = Domain(name='tabletop', build_engine=build_engine, robot_functions=ROBOT_FUNCTIONS, robot_api=robot_api,
                 scene='tabletop',
-                cassette=Path(__file__).resolve().parent / 'cassettes' / 'tabletop_reference.yaml')
+                cassette=Path(__file__).resolve().parent / 'cassettes' / 'tabletop_reference.yaml',
+                nodes=(PERCEPTION_NODE, PICK_PLACE_NODE))
