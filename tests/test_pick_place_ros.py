@@ -21,7 +21,8 @@ from rclpy.parameter import Parameter
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Empty
 
-from cap_control.pick_place_node import PickPlaceNode, _ActionGoal, _mark_canceling
+from cap_control.arm_node import ActionGoal, _mark_canceling
+from cap_control.pick_place_node import PickPlaceNode
 from cap_interfaces.action import FollowJointTrajectory, PickPlace
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectState, ResetScene
@@ -237,7 +238,7 @@ def test_a_cancel_asked_before_the_arm_accepts_its_goal_reaches_it_once_it_does(
         executor.add_node(node)
     try:
         assert client.wait_for_server(timeout_sec=10.0)
-        goal = _ActionGoal(client, FollowJointTrajectory.Goal(), lambda result: result)
+        goal = ActionGoal(client, FollowJointTrajectory.Goal(), lambda result: result)
         assert spin_until(executor, asked.is_set, timeout=10.0)
         cancelled = goal.cancel()
         assert not cancelled.done() and not cancel_requests, 'nothing to cancel before the goal has an id'

@@ -22,14 +22,10 @@ says so instead.
 """
 from __future__ import annotations
 
-import abc
 import dataclasses
-import enum
-import threading
 import time
-from concurrent.futures import Future
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from cap_ros_common.parameters import parameter
@@ -39,7 +35,10 @@ from cap_control.pick_place import (
     GripperStep, ObjectInfo, Observation, PickPlaceConfig, PickPlaceError, PickPlaceErrorCode, PickPlacePlan,
     Stage, StageName, TrajectoryStep, plan_pick_place,
 )
-from cap_control.trajectory import JointTrajectory
+from cap_control.ports import (
+    Arm, ArmOutcome, ArmResult, Ending, Failed, GoalRun, Gripper, GripperOutcome, Interrupted, Interruption,
+    ObjectReport, Perception, WaitTimeouts, interruption_message,
+)
 
 # Perception has no push for "a newer observation": after the retreat it is asked again this often [s] (a camera
 # frame comes every 0.1 s at most).
@@ -85,129 +84,12 @@ class MotionSettings:
                                    clear_view_from=camera)
 
 
-# ----------------------------------------------------------------------------------------------------- ports
-class ArmResult(enum.Enum):
-    SUCCEEDED = 'succeeded'
-    TOLERANCE_VIOLATED = 'tolerance violated'  # the arm strayed from the path, or ended short of its goal
-    FAILED = 'failed'
-
-
-@dataclass(frozen=True)
-class ArmOutcome:
-    result: ArmResult
-    message: str = ''  # why, when not SUCCEEDED
-
-
-@dataclass(frozen=True)
-class GripperOutcome:
-    width: float  # opening the fingers ended at [m]
-    stalled: bool  # they stopped on something before the commanded opening
-
-
-@dataclass(frozen=True)
-class ObjectReport:
-    """Perception's answer about one object."""
-
-    success: bool
-    message: str = ''
-    info: ObjectInfo | None = None  # the object as the planner takes it
-    position: tuple[float, float, float] | None = None  # where perception reports it
-    visible: bool = False  # False: perception only remembers where it was last seen
-    stamp: float = 0.0  # time of the observation answered from [s]; 0: the source has no time stamps
-
-
-class PendingGoal(abc.ABC):
-    """A goal sent to the arm or the gripper."""
-
-    @property
-    @abc.abstractmethod
-    def accepted(self) -> Future:
-        """Completes with True (accepted) or False (refused)."""
-
-    @property
-    @abc.abstractmethod
-    def result(self) -> Future:
-        """Completes with the outcome (ArmOutcome or GripperOutcome) once an accepted goal ends."""
-
-    @abc.abstractmethod
-    def cancel(self) -> Future:
-        """Ask the server to cancel; completes once it has taken the cancel (it then holds where it is).
-
-        May come before `accepted` completes: the cancel is then sent once the server has the goal (the future
-        completes then), and a refused goal completes it at once (it never moved).
-        """
-
-
-class Arm(abc.ABC):
-    server_description = 'the arm controller'  # named in "... is not available"
-    joints_description = 'the arm joints'
-
-    @abc.abstractmethod
-    def server_ready(self) -> Future:
-        """Completes once the trajectory server can take goals; cancelled when the executor stops waiting."""
-
-    @abc.abstractmethod
-    def joints(self) -> Future:
-        """Completes with the arm's joint positions (np.ndarray) once they are known."""
-
-    @abc.abstractmethod
-    def opening(self) -> float | None:
-        """The finger opening read from the joint state now [m], None if unknown."""
-
-    @abc.abstractmethod
-    def state_time(self) -> float | None:
-        """Time stamp of the latest joint state [s], None if none came yet."""
-
-    @abc.abstractmethod
-    def follow(self, trajectory: JointTrajectory, contact_tolerance: float | None) -> PendingGoal:
-        """Send a timed trajectory; with a contact tolerance [rad], a tracking error above it aborts the motion."""
-
-
-class Gripper(abc.ABC):
-    server_description = 'the gripper'
-
-    @abc.abstractmethod
-    def server_ready(self) -> Future:
-        """Completes once the gripper server can take goals; cancelled when the executor stops waiting."""
-
-    @abc.abstractmethod
-    def command(self, position: float, max_effort: float) -> PendingGoal:
-        """Move the fingers to `position` [m] with at most `max_effort` [N] (0: the gripper's default)."""
-
-
-class Perception(abc.ABC):
-    service_description = 'the perception service'
-
-    @abc.abstractmethod
-    def state_service_ready(self) -> Future:
-        """Completes once the object state service can be called; cancelled when the executor stops waiting."""
-
-    @abc.abstractmethod
-    def names_available(self) -> bool:
-        """Whether the object names service can be called now (it is not waited for)."""
-
-    @abc.abstractmethod
-    def object_names(self) -> Future:
-        """Completes with the names of the objects in view now (list[str])."""
-
-    @abc.abstractmethod
-    def object_state(self, name: str) -> Future:
-        """Completes with an ObjectReport."""
-
-
 # ----------------------------------------------------------------------------------------------------- runs
 @dataclass(frozen=True)
 class PickPlaceRequest:
     object_name: str
     target_name: str = ''  # empty: place at target_xy
     target_xy: tuple[float, float] = (0.0, 0.0)
-
-
-class Ending(enum.Enum):
-    SUCCEEDED = 'succeeded'
-    FAILED = 'failed'
-    CANCELLED = 'cancelled'  # by a cancel request
-    STOPPED = 'stopped'  # by a stop request
 
 
 @dataclass(frozen=True)
@@ -218,50 +100,6 @@ class PickPlaceOutcome:
     final_position: tuple[float, float, float] | None = None
     # Interrupted runs: whether the controller confirmed the cancel of the goal that was running (True: none was).
     halt_confirmed: bool = True
-
-
-def interruption_message(ending: Ending, stop_source: str, halt_confirmed: bool, timeout: float) -> str:
-    """The message of a run ended by a cancel (`ending` CANCELLED) or by a stop from `stop_source`."""
-    how = 'cancelled' if ending == Ending.CANCELLED else f'stopped by {stop_source}'
-    if halt_confirmed:
-        return f'{how}: the arm stopped where it was'
-    return f'{how}, but the controller did not confirm the cancel of its goal within {timeout:.0f} s'
-
-
-class Interruption:
-    """Cancel and stop requests for one run, and the condition every wait of the run sleeps on."""
-
-    def __init__(self) -> None:
-        self.condition = threading.Condition()
-        self.reason: Ending | None = None
-
-    def cancel(self) -> None:
-        self._set(Ending.CANCELLED)
-
-    def stop(self) -> None:
-        self._set(Ending.STOPPED)
-
-    def _set(self, reason: Ending) -> None:
-        with self.condition:
-            if self.reason is None:
-                self.reason = reason
-            self.condition.notify_all()
-
-    def notify(self, *_: Any) -> None:
-        """Wake the waits (a future's done callback)."""
-        with self.condition:
-            self.condition.notify_all()
-
-
-class _Interrupted(Exception):
-    pass
-
-
-class _Failed(Exception):
-    def __init__(self, code: PickPlaceErrorCode, message: str):
-        super().__init__(message)
-        self.code = code
-        self.message = message
 
 
 FeedbackCallback = Callable[[StageName, float], None]
@@ -288,7 +126,7 @@ class PickPlaceExecutor:
             self.log('info', f'placed the {plan.object.name} on {plan.target_description}')
             return PickPlaceOutcome(Ending.SUCCEEDED, PickPlaceErrorCode.NONE, '',
                                     final.position if final.success else None)
-        except _Interrupted:
+        except Interrupted:
             confirmed = run.cancel_active_goal()
             ending = Ending.CANCELLED if interruption.reason == Ending.CANCELLED else Ending.STOPPED
             if not confirmed:
@@ -297,56 +135,22 @@ class PickPlaceExecutor:
                                     interruption_message(ending, self.stop_source, confirmed,
                                                          self.timeouts.service_timeout),
                                     halt_confirmed=confirmed)
-        except (_Failed, PickPlaceError) as failure:
+        except (Failed, PickPlaceError) as failure:
             run.cancel_active_goal()
             self.log('warning', f'pick-and-place failed: {failure.message}')
             return PickPlaceOutcome(Ending.FAILED, failure.code, failure.message)
 
 
-class _Run:
+class _Run(GoalRun):
     """One request's waits, steps and checks."""
 
     def __init__(self, executor: PickPlaceExecutor, interruption: Interruption):
+        super().__init__(interruption, WaitTimeouts(executor.timeouts.service_timeout,
+                                                    executor.timeouts.server_timeout),
+                         PickPlaceErrorCode.TIMEOUT, PickPlaceErrorCode.UNKNOWN)
         self.executor = executor
         self.arm, self.gripper, self.perception = executor.arm, executor.gripper, executor.perception
         self.timeouts = executor.timeouts
-        self.interruption = interruption
-        self.active: PendingGoal | None = None  # the arm or gripper goal running now (cancelled on interrupt)
-
-    # ------------------------------------------------------------------------------------------- waiting
-    def _check_interrupted(self) -> None:
-        if self.interruption.reason is not None:
-            raise _Interrupted()
-
-    def wait(self, future: Future, timeout: float, failure: str) -> Any:
-        """The future's result; raises _Interrupted on cancel/stop and _Failed(TIMEOUT, failure) after `timeout`."""
-        condition = self.interruption.condition
-        future.add_done_callback(self.interruption.notify)
-        deadline = time.monotonic() + timeout
-        with condition:
-            while not future.done():
-                self._check_interrupted()
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise _Failed(PickPlaceErrorCode.TIMEOUT, failure)
-                condition.wait(left)
-        return future.result()
-
-    def answer(self, future: Future, timeout: float, what: str) -> Any:
-        return self.wait(future, timeout, f'no answer from {what} within {timeout:.0f} s')
-
-    def available(self, future: Future, what: str) -> None:
-        try:
-            self.wait(future, self.timeouts.server_timeout, f'{what} is not available')
-        finally:
-            future.cancel()  # no-op once done; otherwise tells the port to stop looking
-
-    def pause(self, seconds: float) -> None:
-        """Wait `seconds`, or less if interrupted (then raise)."""
-        with self.interruption.condition:
-            self._check_interrupted()
-            self.interruption.condition.wait(seconds)
-        self._check_interrupted()
 
     # ------------------------------------------------------------------------------------------- perception
     def object_state(self, name: str) -> ObjectReport:
@@ -379,13 +183,13 @@ class _Run:
     def plan(self, request: PickPlaceRequest) -> PickPlacePlan:
         found = self.object_state(request.object_name)
         if not found.success:
-            raise _Failed(PickPlaceErrorCode.OBJECT_NOT_FOUND, found.message or
+            raise Failed(PickPlaceErrorCode.OBJECT_NOT_FOUND, found.message or
                           f'no object named {request.object_name!r}')
         target: ObjectInfo | Sequence[float]
         if request.target_name:
             target_found = self.object_state(request.target_name)
             if not target_found.success:
-                raise _Failed(PickPlaceErrorCode.TARGET_NOT_FOUND, target_found.message or
+                raise Failed(PickPlaceErrorCode.TARGET_NOT_FOUND, target_found.message or
                               f'no object named {request.target_name!r}')
             target = target_found.info
         else:
@@ -399,7 +203,7 @@ class _Run:
         observation = Observation()
         done = 0.0
         for stage in plan.stages:
-            self._check_interrupted()
+            self.check_interrupted()
             feedback(stage.name, float(done))
             for step in stage.steps:
                 if isinstance(step, TrajectoryStep):
@@ -413,20 +217,13 @@ class _Run:
             done = stage.progress
         feedback(plan.stages[-1].name, 1.0)
 
-    def _send(self, goal: PendingGoal, what: str, refusal: str) -> None:
-        # Active before the acceptance comes: an interruption or timeout while waiting for it cancels the goal too.
-        self.active = goal
-        if not self.answer(goal.accepted, self.timeouts.service_timeout, what):
-            self.active = None
-            raise _Failed(PickPlaceErrorCode.UNKNOWN, refusal)
-
     def move(self, plan: PickPlacePlan, step: TrajectoryStep) -> None:
         trajectory = plan.trajectory_for(step, self.current_joints())
         if len(trajectory) < 2:
             return
         self.available(self.arm.server_ready(), self.arm.server_description)
         goal = self.arm.follow(trajectory, step.contact_tolerance if step.stop_on_contact else None)
-        self._send(goal, 'the arm controller', 'the arm controller refused the trajectory')
+        self.send(goal, 'the arm controller', 'the arm controller refused the trajectory')
         outcome: ArmOutcome = self.answer(goal.result, trajectory.duration + self.timeouts.motion_timeout_margin,
                                           'the arm controller')
         self.active = None
@@ -437,12 +234,12 @@ class _Run:
             # a few milliradians short of its goal): placing ends here.
             self.executor.log('debug', f'touched down: {outcome.message}')
             return
-        raise _Failed(PickPlaceErrorCode.UNKNOWN, f'the arm did not complete its motion: {outcome.message}')
+        raise Failed(PickPlaceErrorCode.UNKNOWN, f'the arm did not complete its motion: {outcome.message}')
 
     def grip(self, step: GripperStep, observation: Observation) -> None:
         self.available(self.gripper.server_ready(), self.gripper.server_description)
         goal = self.gripper.command(step.position, step.max_effort)
-        self._send(goal, 'the gripper', 'the gripper refused the command')
+        self.send(goal, 'the gripper', 'the gripper refused the command')
         outcome: GripperOutcome = self.answer(goal.result, self.timeouts.gripper_timeout, 'the gripper')
         self.active = None
         observation.gripper_position = outcome.width
@@ -492,16 +289,4 @@ class _Run:
         for check in stage.checks:
             failure = check.failure(observation)
             if failure:
-                raise _Failed(stage.failure_code, failure)
-
-    def cancel_active_goal(self) -> bool:
-        """Cancel the goal sent last, accepted or not yet; True once the server has taken the cancel (or none ran).
-
-        The controller holds the arm (or the fingers) where they are; answer only once it has taken the cancel.
-        """
-        goal, self.active = self.active, None
-        if goal is None:
-            return True
-        done = threading.Event()
-        goal.cancel().add_done_callback(lambda _: done.set())
-        return done.wait(self.timeouts.service_timeout)
+                raise Failed(stage.failure_code, failure)

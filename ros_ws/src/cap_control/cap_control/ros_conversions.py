@@ -16,7 +16,7 @@ from cap_interfaces.msg import ObjectState as ObjectStateMsg
 from cap_interfaces.srv import GetObjectState
 
 from cap_control.pick_place import ObjectInfo, yaw_of_quaternion
-from cap_control.pick_place_executor import ArmOutcome, ArmResult, ObjectReport
+from cap_control.ports import ArmOutcome, ArmResult, ObjectReport
 from cap_control.trajectory import JointTrajectory
 
 GRIPPER_FINGER_JOINTS = ('gripper_left_finger_joint', 'gripper_right_finger_joint')
@@ -30,14 +30,18 @@ def trajectory_msg(trajectory: JointTrajectory) -> JointTrajectoryMsg:
                               trajectory.accelerations)])
 
 
-def follow_trajectory_goal(trajectory: JointTrajectory,
-                           contact_tolerance: float | None = None) -> FollowJointTrajectory.Goal:
+def follow_trajectory_goal(trajectory: JointTrajectory, contact_tolerance: float | None = None,
+                           goal_tolerance: float | None = None) -> FollowJointTrajectory.Goal:
     """The goal for one trajectory; with a contact tolerance [rad], that is its path tolerance, so that the
-    controller aborts with PATH_TOLERANCE_VIOLATED where the arm touches down."""
+    controller aborts with PATH_TOLERANCE_VIOLATED where the arm touches down; a goal tolerance [rad] is the
+    position tolerance of the end (a tool pressing on a surface stops a few milliradians short)."""
     goal = FollowJointTrajectory.Goal(trajectory=trajectory_msg(trajectory))
     if contact_tolerance is not None:
         goal.path_tolerance = [JointTolerance(name=name, position=contact_tolerance, velocity=-1.0,
                                               acceleration=-1.0) for name in trajectory.joint_names]
+    if goal_tolerance is not None:  # velocity and acceleration 0: the controller's defaults
+        goal.goal_tolerance = [JointTolerance(name=name, position=goal_tolerance, velocity=0.0, acceleration=0.0)
+                               for name in trajectory.joint_names]
     return goal
 
 

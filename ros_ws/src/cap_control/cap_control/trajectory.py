@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import ruckig
@@ -214,6 +214,31 @@ def cartesian_line(q_start: Sequence[float], end_pose: np.ndarray, limits: Joint
     if length < 1e-9 and angle < 1e-9:
         return _at_rest(q_start)
     slerp = Slerp([0.0, 1.0], rotations)
+
+    def poses_at(s: np.ndarray) -> np.ndarray:
+        poses = np.tile(np.eye(4), (len(s), 1, 1))
+        poses[:, :3, :3] = slerp(s).as_matrix()
+        poses[:, :3, 3] = (1.0 - s)[:, None] * start_pose[:3, 3] + s[:, None] * end_pose[:3, 3]
+        return poses
+
+    return timed_cartesian_path(q_start, poses_at, length, angle, limits, cartesian_limits, period, tool_offset,
+                                max_joint_step)
+
+
+def timed_cartesian_path(q_start: Sequence[float], poses_at: Callable[[np.ndarray], np.ndarray], length: float,
+                         angle: float = 0.0, limits: JointLimits = UR5E_LIMITS,
+                         cartesian_limits: CartesianLimits = CartesianLimits(), period: float = DEFAULT_PERIOD,
+                         tool_offset: float = DEFAULT_TOOL_OFFSET, max_joint_step: float = 0.1) -> JointTrajectory:
+    """Joint trajectory moving the TCP along a Cartesian path from rest to rest.
+
+    `poses_at(s)` gives the TCP poses (N, 4, 4) at path parameters s (N,) in [0, 1]; `poses_at([0])` must be where
+    `q_start` puts the TCP. `length` [m] and `angle` [rad] are the path's length and total turn, which set how
+    fast s may run within `cartesian_limits`. s is timed by Ruckig (jerk-limited), every sample solved by IK seeded
+    with the previous one, and the whole path slowed down until the joints respect `limits` (velocity and
+    acceleration). Raises TrajectoryError if a sample leaves the IK branch (a joint jumps by more than
+    `max_joint_step` [rad] between samples) and IKError if a sample is out of reach.
+    """
+    q_start = np.asarray(q_start, dtype=float)
     # Path-parameter limits: the tighter of the linear and angular ones.
     speed = min(cartesian_limits.speed / max(length, 1e-12), cartesian_limits.angular_speed / max(angle, 1e-12))
     acceleration = cartesian_limits.acceleration / max(length, 1e-12) if length > 1e-9 else speed * 4.0
@@ -221,31 +246,27 @@ def cartesian_line(q_start: Sequence[float], end_pose: np.ndarray, limits: Joint
     for _ in range(20):
         times, s = _time_path_parameter(period, speed, acceleration, jerk)
         positions = np.empty((len(times), 6))
-        orientations = slerp(s).as_matrix()
         previous = q_start
-        for k, (sk, orientation) in enumerate(zip(s, orientations)):
-            pose = np.eye(4)
-            pose[:3, :3] = orientation
-            pose[:3, 3] = (1.0 - sk) * start_pose[:3, 3] + sk * end_pose[:3, 3]
+        for k, pose in enumerate(poses_at(s)):
             q = inverse_kinematics(pose, q_seed=previous, tool_offset=tool_offset)
             step = float(np.max(np.abs(q - previous)))
             if step > max_joint_step:
                 raise TrajectoryError(
-                    f'the straight line would flip the arm configuration at {np.round(pose[:3, 3], 3).tolist()} '
+                    f'the path would flip the arm configuration at {np.round(pose[:3, 3], 3).tolist()} '
                     f'(a joint jumps by {step:.2f} rad between samples)')
             positions[k] = q
             previous = q
-        positions[0] = q_start  # the line starts exactly where the arm is
+        positions[0] = q_start  # the path starts exactly where the arm is
         velocities = _finite_difference(positions, times)
         accelerations = _finite_difference(velocities, times)
         ratio = max(float(np.max(np.abs(velocities) / limits.velocity)),
                     math.sqrt(float(np.max(np.abs(accelerations) / limits.acceleration))))
         if ratio <= 1.0:
             return JointTrajectory(times, positions, velocities, accelerations)
-        # Too fast for a joint (near a singularity): slow the whole line and time it again.
+        # Too fast for a joint (near a singularity): slow the whole path and time it again.
         slow_down = 0.9 / ratio
         speed, acceleration, jerk = speed * slow_down, acceleration * slow_down ** 2, jerk * slow_down ** 3
-    raise TrajectoryError('the straight line cannot be made slow enough for the joint limits (singularity?)')
+    raise TrajectoryError('the path cannot be made slow enough for the joint limits (singularity?)')
 
 
 def trajectory_tcp_positions(trajectory: JointTrajectory, tool_offset: float = DEFAULT_TOOL_OFFSET) -> np.ndarray:
@@ -255,5 +276,6 @@ def trajectory_tcp_positions(trajectory: JointTrajectory, tool_offset: float = D
 
 __all__ = [
     'CartesianLimits', 'DEFAULT_PERIOD', 'JointLimits', 'JointTrajectory', 'TrajectoryError',
-    'UR5E_LIMITS', 'cartesian_line', 'concatenate', 'time_joint_path', 'trajectory_tcp_positions',
+    'UR5E_LIMITS', 'cartesian_line', 'concatenate', 'time_joint_path', 'timed_cartesian_path',
+    'trajectory_tcp_positions',
 ]

@@ -10,9 +10,9 @@ import pytest
 
 from cap_control.kinematics import HOME_JOINTS, forward_kinematics
 from cap_control.pick_place import ObjectInfo, PickPlaceConfig, PickPlaceErrorCode, StageName
-from cap_control.pick_place_executor import (
-    Arm, ArmOutcome, ArmResult, Ending, ExecutionConfig, Gripper, GripperOutcome, Interruption, ObjectReport,
-    PendingGoal, Perception, PickPlaceExecutor, PickPlaceRequest,
+from cap_control.pick_place_executor import ExecutionConfig, PickPlaceExecutor, PickPlaceRequest
+from cap_control.ports import (
+    Arm, ArmOutcome, ArmResult, Ending, Gripper, GripperOutcome, Interruption, ObjectReport, PendingGoal, Perception,
 )
 
 BLOCK = (0.04, 0.04, 0.04)
