@@ -17,6 +17,7 @@ from cap_lmp.engine import Engine, LMPConfig
 from cap_lmp.llm import LLMClient
 from cap_lmp.prompts import load_prompt
 from cap_lmp.sandbox import SandboxLimits
+from cap_lmp_ros.domains.object_names import object_name_candidate
 from cap_lmp_ros.domains.tabletop.answer_check import invented_object
 from cap_tabletop.workspace import CORNERS, MIDDLE, NORMALISED_ORIGIN, NORMALISED_SPAN, SIDES
 
@@ -43,19 +44,6 @@ def get_corner_name(pos: Sequence[float]) -> str:
 def get_side_name(pos: Sequence[float]) -> str:
     """The name of the table side closest to `pos`."""
     return _closest(pos, SIDES)
-
-
-def object_name_candidate(name: Any) -> str | None:
-    """What a program most likely meant as one object's name: the text itself, the one name of a one-item list
-    (`parse_obj_name` answers lists), without a leading "the", case and spaces folded; None if it is not a name."""
-    if isinstance(name, (list, tuple)) and len(name) == 1:
-        name = name[0]
-    if not isinstance(name, str):
-        return None
-    words = name.strip().lower().split()
-    if words[:1] == ['the']:
-        words = words[1:]
-    return ' '.join(words)
 
 
 def tabletop_lmp_configs() -> list[LMPConfig]:
