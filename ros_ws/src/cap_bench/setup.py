@@ -26,6 +26,7 @@ setup(
         # `cap bench tabletop` (cap_bringup's command line finds benchmarks through this group).
         'cap_ros.benchmarks': [
             'tabletop = cap_bench.runner:main',
+            'whiteboard = cap_bench.whiteboard.bench:main',
             'codegen = cap_bench.codegen.bench:main',
             'humaneval = cap_bench.humaneval.bench:main',
             'reasoning = cap_bench.reasoning.bench:main',

@@ -23,6 +23,7 @@ setup(
     entry_points={
         'console_scripts': [
             'pick_place = cap_control.pick_place_node:main',
+            'follow_path = cap_control.follow_path_node:main',
         ],
     },
 )

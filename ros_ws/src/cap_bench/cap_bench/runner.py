@@ -86,9 +86,10 @@ def policy_description(options: BenchOptions) -> str:
 
 
 @contextlib.contextmanager
-def model_endpoint(options: BenchOptions) -> Iterator[BenchOptions]:
+def model_endpoint(options: BenchOptions, domain: str = 'tabletop') -> Iterator[BenchOptions]:
     """The options with the model's endpoint filled in: for backend=local, one llama.cpp server on loopback for the
-    whole run (its prompt cache stays warm across episodes), stopped at the end; otherwise the options as given."""
+    whole run (its prompt cache stays warm across episodes, warmed with `domain`'s prompts), stopped at the end;
+    otherwise the options as given."""
     if options.policy != 'llm' or options.backend != 'local':
         yield options
         return
@@ -98,7 +99,7 @@ def model_endpoint(options: BenchOptions) -> Iterator[BenchOptions]:
     # Graph job i runs on CPU i (see _worker): the server takes the CPUs after those, if there are any.
     allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else []
     spare = tuple(allowed[max(1, options.jobs):])
-    heads = prompt_heads(get_domain('tabletop'))
+    heads = prompt_heads(get_domain(domain))
 
     def read_prompts_again(generation: int) -> None:  # a restarted server has an empty prompt cache
         if generation > 1:

@@ -1,12 +1,15 @@
 """sim_bridge: the MuJoCo world (a registered scene, by default the table top) on ROS 2, standing in for the robot
 driver and the cameras.
 
-Publishes /clock (simulated time), /joint_states, the ground-truth object array, and per camera
-<CAMERA_NAMESPACE>/<camera>/{color, depth, camera_info, pose}; serves the scene reset, a FollowJointTrajectory
-action and a GripperCommand action. Like a robot driver it does not listen to /cap/stop: the motion owners
-(cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it stopped. The physics
-runs in a thread of its own (never on an executor thread); the callbacks, which may block while a motion runs, need
-a MultiThreadedExecutor with a few threads (main() uses 8). Parameters: SimBridgeConfig (cap_sim_bridge.config).
+Publishes /clock (simulated time), /joint_states (the arm, the fingers and a scene's passive tool joints, such as
+the whiteboard's sprung marker), the ground-truth object array, per camera <CAMERA_NAMESPACE>/<camera>/{color,
+depth, camera_info, pose}, and in a scene with a whiteboard its ink (SIM_INK_TOPIC when it changes, at most
+`ink_rate` times a second of simulated time, and a PNG from SIM_GET_INK_SERVICE); serves the scene reset, a
+FollowJointTrajectory action and a GripperCommand action. Like a robot driver it does not listen to /cap/stop: the
+motion owners (cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it stopped.
+The physics runs in a thread of its own (never on an executor thread); the callbacks, which may block while a motion
+runs, need a MultiThreadedExecutor with a few threads (main() uses 8). Parameters: SimBridgeConfig
+(cap_sim_bridge.config).
 
 Idle: in real time, once no goal has run and nothing has moved for `idle_after` seconds (rest.py), /clock,
 /joint_states, the objects and the cameras drop to their idle rates (the cameras resend the frame rendered when the
@@ -17,8 +20,8 @@ QoS, chosen on purpose:
   a reliable publisher also serves best-effort subscribers);
 - images, depth, camera_info: reliable, keep last 1: any subscriber (default or sensor-data QoS) receives them,
   and keep-last 1 hands a slow subscriber the newest frame instead of a backlog;
-- ground-truth objects and camera poses: reliable, transient local, keep last 1: a node that starts later gets
-  the current scene and the camera extrinsics at once.
+- ground-truth objects, camera poses and the whiteboard's ink: reliable, transient local, keep last 1: a node that
+  starts later gets the current scene, the camera extrinsics and the ink at once.
 """
 from __future__ import annotations
 
@@ -36,12 +39,12 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import CameraInfo, Image, JointState
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from cap_interfaces.action import FollowJointTrajectory, GripperCommand
 from cap_interfaces.msg import GraphNames, ObjectArray
-from cap_interfaces.srv import ResetScene
+from cap_interfaces.srv import GetInk, ResetScene
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.time import duration_msg, time_msg
 from cap_sim_bridge import ros_conversions as conv
@@ -49,7 +52,6 @@ from cap_sim_bridge import trajectory_goal
 from cap_sim_bridge.pacing import Pacer
 from cap_sim_bridge.rest import RestWatch
 from cap_sim_bridge.config import SimBridgeConfig, cameras_to_publish
-from cap_sim_bridge.scene import ObjectSpec
 from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES, TabletopWorld
 
 STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -88,7 +90,8 @@ class SimBridgeNode(Node):
         scene_name, seed = config.scene, config.seed
 
         names = [n for n in (part.strip() for part in config.objects.split(',')) if n]
-        self.world = TabletopWorld(scene_name, seed, [ObjectSpec.from_name(n) for n in names] or None)
+        # Names, not specs: the world reads them once its scene (and the object kinds the scene brings) is loaded.
+        self.world = TabletopWorld(scene_name, seed, names or None)
         self._cameras = cameras_to_publish(config.cameras, self.world.scene.camera_names, self.world.camera_names)
 
         self._clock_pub = self.create_publisher(Clock, GraphNames.CLOCK_TOPIC, STATE_QOS)
@@ -104,6 +107,12 @@ class SimBridgeNode(Node):
 
         callbacks = ReentrantCallbackGroup()
         self.create_service(ResetScene, GraphNames.SIM_RESET_SERVICE, self._on_reset, callback_group=callbacks)
+        self._ink_pub = None
+        if self.world.ink_canvas is not None:
+            self._ink_pub = self.create_publisher(Image, GraphNames.SIM_INK_TOPIC, LATCHED_QOS)
+            self.create_service(GetInk, GraphNames.SIM_GET_INK_SERVICE, self._on_get_ink, callback_group=callbacks)
+        self._ink_rate = config.ink_rate
+        self._joint_names = ARM_JOINT_NAMES + GRIPPER_JOINT_NAMES + self.world.extra_joint_names
         self._trajectory_server = ActionServer(
             self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION,
             lambda handle: self._while_running(self._execute_trajectory, handle),
@@ -142,7 +151,8 @@ class SimBridgeNode(Node):
         pacer = Pacer(self._real_time_factor)
         # Idle (real time only: as fast as possible, simulated time would race ahead while nothing happens).
         rest = RestWatch(config.idle_after if self._real_time_factor > 0 else 0.0)
-        next_objects = next_camera = world.time
+        next_objects = next_camera = next_ink = world.time
+        ink_version = -1  # the ink version last published
         last_state_wall = last_objects_wall = -math.inf
         idle_frames: list[tuple[Any, ...]] | None = None  # the camera messages rendered when idling began
         try:
@@ -160,10 +170,13 @@ class SimBridgeNode(Node):
                     world.step(steps)
                     now = world.time
                     joints = conv.joint_state_msg(
-                        now, ARM_JOINT_NAMES + GRIPPER_JOINT_NAMES,
-                        np.concatenate([world.joint_positions(), world.finger_positions()]),
-                        np.concatenate([world.joint_velocities(), world.finger_velocities()]),
-                        np.concatenate([world.joint_efforts(), np.zeros(2)])) if publish_state else None
+                        now, self._joint_names,
+                        np.concatenate([world.joint_positions(), world.finger_positions(),
+                                        world.extra_joint_positions()]),
+                        np.concatenate([world.joint_velocities(), world.finger_velocities(),
+                                        world.extra_joint_velocities()]),
+                        np.concatenate([world.joint_efforts(), np.zeros(2 + len(world.extra_joint_names))])) \
+                        if publish_state else None
                     objects = world.object_states() if now >= next_objects and objects_rate > 0 and \
                         wall - last_objects_wall >= 1.0 / MAX_WALL_OBJECTS_RATE else None
                 if joints is not None:
@@ -175,6 +188,10 @@ class SimBridgeNode(Node):
                                                           objects=[conv.object_state_msg(s) for s in objects]))
                     next_objects = max(next_objects + 1.0 / objects_rate, now)
                     last_objects_wall = wall
+                if self._ink_pub is not None and world.ink_canvas.version != ink_version and now >= next_ink:
+                    image, ink_version = world.ink_canvas.snapshot()
+                    self._ink_pub.publish(conv.ink_image_msg(now, image))
+                    next_ink = now + 1.0 / self._ink_rate
                 camera_rate = config.idle_camera_rate if idle else self._camera_rate
                 if not idle:
                     idle_frames = None
@@ -232,6 +249,18 @@ class SimBridgeNode(Node):
                                               objects=[conv.object_state_msg(s) for s in states]))
         for camera, pose in poses.items():
             self._camera_pubs[camera]['pose'].publish(conv.pose_stamped_msg(now, pose))
+
+    # ----------------------------------------------------------------------------------------------- ink
+    def _on_get_ink(self, request: GetInk.Request, response: GetInk.Response) -> GetInk.Response:
+        canvas = self.world.ink_canvas
+        with self.world.lock:
+            now = self.world.time
+        response.image = CompressedImage(header=conv.header(now), format='png', data=canvas.png())
+        response.image.header.frame_id = 'whiteboard'
+        response.resolution = canvas.spec.resolution
+        response.x_min, response.y_max = canvas.spec.x_range[0], canvas.spec.y_range[1]
+        response.success = True
+        return response
 
     # --------------------------------------------------------------------------------------------- reset
     def _on_reset(self, request: ResetScene.Request, response: ResetScene.Response) -> ResetScene.Response:

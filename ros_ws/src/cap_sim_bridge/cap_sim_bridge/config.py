@@ -41,6 +41,8 @@ class SimBridgeConfig:
     goal_time_tolerance: float = parameter(trajectory_goal.DEFAULT_GOAL_TIME_TOLERANCE,
                                            "Default time after a trajectory's end to meet the goal tolerance [s].")
     gripper_timeout: float = parameter(5.0, 'Longest gripper motion [s of simulated time].')
+    ink_rate: float = parameter(5.0, 'In a scene with a whiteboard: most ink images a second of simulated time, '
+                                     'sent only when the ink changed [Hz].')
 
 
 def cameras_to_publish(requested: tuple[str, ...], scene_default: tuple[str, ...],

@@ -55,6 +55,11 @@ class RgbdRenderer:
         mujoco.mjv_updateScene(self.model, data, self._option, None, self._camera, mujoco.mjtCatBit.mjCAT_ALL,
                                self._scene)
 
+    def upload_texture(self, texture_id: int) -> None:
+        """Send the model's texture `texture_id` (changed in model.tex_data) to this renderer's OpenGL context."""
+        self._gl.make_current()
+        mujoco.mjr_uploadTexture(self.model, self._context, texture_id)
+
     def render(self, with_depth: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """(rgb uint8 HxWx3, depth float32 HxW [m along the optical axis] or None) of the last snapshot."""
         self._gl.make_current()

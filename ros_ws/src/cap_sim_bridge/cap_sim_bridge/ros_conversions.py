@@ -69,6 +69,13 @@ def depth_image_msg(seconds: float, camera: str, depth: np.ndarray) -> Image:
                  is_bigendian=0, step=width * 4, data=depth.tobytes())
 
 
+def ink_image_msg(seconds: float, ink: np.ndarray) -> Image:
+    """A whiteboard's ink image: mono8, 255 = ink, row 0 = the board's top edge (GraphNames.SIM_INK_TOPIC)."""
+    height, width = ink.shape
+    return Image(header=header(seconds, 'whiteboard'), height=height, width=width, encoding='mono8',
+                 is_bigendian=0, step=width, data=np.ascontiguousarray(ink, dtype=np.uint8).tobytes())
+
+
 def camera_info_msg(seconds: float, camera: str, intrinsics: CameraIntrinsics) -> CameraInfo:
     k = intrinsics
     return CameraInfo(header=header(seconds, optical_frame_id(camera)), height=k.height, width=k.width,

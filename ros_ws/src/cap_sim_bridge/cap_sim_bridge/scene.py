@@ -1,24 +1,29 @@
 """Objects of a scene and how they become MuJoCo bodies: the object spec, the seed's default episode, spawn sampling.
 
-Blocks and bowls are added to a scene's MjSpec here, one free body per object, named exactly as the object
-("red block", "blue bowl"); their sizes and colours are the table-top facts of cap_tabletop. Which scenes exist
-(and the fixed part of each: robot, table, cameras) is cap_sim_bridge.scenes.
+Objects are added to a scene's MjSpec here, one free body per object, named exactly as the object ("red block",
+"blue bowl"). Each category is an ObjectKind (its bodies' geoms and resting height): blocks and bowls are built in,
+with the sizes and colours of the table-top facts of cap_tabletop; a scene module registers more
+(`register_object_kind`, e.g. the whiteboard's fruit). Which scenes exist (and the fixed part of each: robot,
+table, cameras) is cap_sim_bridge.scenes.
 """
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Iterable, Sequence
+import threading
+from typing import Callable, Iterable, Sequence
 
 import mujoco
 import numpy as np
+from cap_tabletop import objects as tabletop_objects
 from cap_tabletop.objects import (BOWL_BOTTOM_RADIUS, BOWL_BOTTOM_THICKNESS, BOWL_WALL_HEIGHT, BOWL_WALL_SEGMENTS,
-                                  BOWL_WALL_THICKNESS, BOWL_WALL_TILT, BLOCK_SIZE, CATEGORIES, CATEGORY_BLOCK,
-                                  CATEGORY_BOWL, resting_height)
+                                  BOWL_WALL_THICKNESS, BOWL_WALL_TILT, BLOCK_SIZE, CATEGORY_BLOCK, CATEGORY_BOWL)
 from cap_tabletop.palette import PALETTE, rgba
 from cap_tabletop.workspace import SPAWN_MIN_SEPARATION, SPAWN_X_RANGE, SPAWN_Y_RANGE
 
-__all__ = ['ObjectSpec', 'add_objects', 'default_objects', 'resting_height', 'rgba', 'sample_spawn_positions']
+__all__ = ['ObjectKind', 'ObjectSpec', 'add_objects', 'default_objects', 'object_categories', 'object_geom',
+           'register_object_kind',
+           'resting_height', 'rgba', 'sample_spawn_positions']
 
 # Bodies added per object, physical properties the table-top facts leave to the simulator.
 BLOCK_MASS = 0.01  # [kg]
@@ -43,13 +48,18 @@ class ObjectSpec:
 
     @classmethod
     def from_name(cls, name: str, position: tuple[float, float] | None = None) -> 'ObjectSpec':
-        """'red block' -> ObjectSpec('red block', 'block', 'red')."""
-        color_name, _, category = name.strip().lower().partition(' ')
+        """'red block' -> ObjectSpec('red block', 'block', 'red'); a kind named alone ('apple') takes its colour."""
+        text = ' '.join(name.strip().lower().split())
+        kind = _kinds.get(text)
+        if kind is not None and kind.color_name:
+            return cls(text, text, kind.color_name, position)
+        color_name, _, category = text.partition(' ')
         return cls(f'{color_name} {category}', category, color_name, position)
 
     def validate(self) -> None:
-        if self.category not in CATEGORIES:
-            raise ValueError(f'unknown category {self.category!r} of {self.name!r}; known: {", ".join(CATEGORIES)}')
+        if self.category not in _kinds:
+            raise ValueError(f'unknown category {self.category!r} of {self.name!r}; known: '
+                             f'{", ".join(object_categories())}')
         if self.color_name not in PALETTE:
             raise ValueError(f'unknown colour {self.color_name!r} of {self.name!r}; known: {", ".join(PALETTE)}')
         if not self.name:
@@ -101,14 +111,49 @@ def add_objects(spec: mujoco.MjSpec, objects: Iterable[ObjectSpec]) -> mujoco.Mj
         obj.validate()
         body = spec.worldbody.add_body(name=obj.name, pos=[0.0, 0.0, resting_height(obj.category)])
         body.add_freejoint(name=obj.name)
-        if obj.category == CATEGORY_BLOCK:
-            _add_block_geoms(body, obj)
-        else:
-            _add_bowl_geoms(body, obj)
+        _kinds[obj.category].add_geoms(body, obj)
     return spec
 
 
-def _object_geom(body: mujoco.MjsBody, obj: ObjectSpec, **kwargs) -> mujoco.MjsGeom:
+@dataclasses.dataclass(frozen=True)
+class ObjectKind:
+    """One category of object: how its body's geoms are made (`add_geoms(body, obj)`, with `object_geom` for the
+    collision and colour settings every object shares), and the height of the body's origin above the surface it
+    rests on. `color_name`: the colour of a kind named alone ("apple"); empty for kinds named "<colour> <kind>"."""
+
+    category: str
+    add_geoms: Callable[[mujoco.MjsBody, 'ObjectSpec'], None]
+    resting_height: float
+    color_name: str = ''
+
+
+_kinds: dict[str, ObjectKind] = {}
+_kinds_lock = threading.Lock()
+
+
+def register_object_kind(kind: ObjectKind) -> ObjectKind:
+    """Make a category of object known to every scene; ValueError if another kind has its name."""
+    with _kinds_lock:
+        known = _kinds.get(kind.category)
+        if known is not None and known != kind:
+            raise ValueError(f'an object kind named {kind.category!r} is registered already')
+        _kinds[kind.category] = kind
+    return kind
+
+
+def object_categories() -> list[str]:
+    """The categories of object the scenes can hold."""
+    with _kinds_lock:
+        return sorted(_kinds)
+
+
+def resting_height(category: str) -> float:
+    """z above the surface of the object's origin when it rests there (a cube's centre, a bowl's bottom)."""
+    return _kinds[category].resting_height
+
+
+def object_geom(body: mujoco.MjsBody, obj: ObjectSpec, **kwargs) -> mujoco.MjsGeom:
+    """A geom of an object's body, colliding with everything, in the object's palette colour."""
     geom = body.add_geom(contype=_OBJECT_CONTYPE, conaffinity=_OBJECT_CONAFFINITY, rgba=rgba(obj.color_name),
                          friction=[0.9, 0.005, 0.0001], **kwargs)
     return geom
@@ -116,7 +161,7 @@ def _object_geom(body: mujoco.MjsBody, obj: ObjectSpec, **kwargs) -> mujoco.MjsG
 
 def _add_block_geoms(body: mujoco.MjsBody, obj: ObjectSpec) -> None:
     half = BLOCK_SIZE / 2
-    _object_geom(body, obj, name=obj.name, type=mujoco.mjtGeom.mjGEOM_BOX, size=[half, half, half],
+    object_geom(body, obj, name=obj.name, type=mujoco.mjtGeom.mjGEOM_BOX, size=[half, half, half],
                  mass=BLOCK_MASS)
 
 
@@ -124,7 +169,7 @@ def _add_bowl_geoms(body: mujoco.MjsBody, obj: ObjectSpec) -> None:
     # Mass split between the bottom (most, keeps the centre of mass low) and the walls.
     wall_mass = 0.3 * BOWL_MASS / BOWL_WALL_SEGMENTS
     half_bottom = BOWL_BOTTOM_THICKNESS / 2
-    _object_geom(body, obj, name=f'{obj.name} bottom', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+    object_geom(body, obj, name=f'{obj.name} bottom', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                  size=[BOWL_BOTTOM_RADIUS, half_bottom, 0.0], pos=[0.0, 0.0, half_bottom], mass=0.7 * BOWL_MASS)
     slant_half_length = BOWL_WALL_HEIGHT / 2 / math.cos(BOWL_WALL_TILT)
     centre_radius = (BOWL_BOTTOM_RADIUS + BOWL_WALL_THICKNESS / 2 + BOWL_WALL_HEIGHT / 2 * math.tan(BOWL_WALL_TILT))
@@ -138,7 +183,7 @@ def _add_bowl_geoms(body: mujoco.MjsBody, obj: ObjectSpec) -> None:
         mujoco.mju_mat2Quat(quat, rotation.flatten())
         pos = [centre_radius * math.cos(azimuth), centre_radius * math.sin(azimuth),
                BOWL_BOTTOM_THICKNESS + BOWL_WALL_HEIGHT / 2]
-        _object_geom(body, obj, name=f'{obj.name} wall {k}', type=mujoco.mjtGeom.mjGEOM_BOX,
+        object_geom(body, obj, name=f'{obj.name} wall {k}', type=mujoco.mjtGeom.mjGEOM_BOX,
                      size=[half_width, BOWL_WALL_THICKNESS / 2, slant_half_length], pos=pos, quat=quat,
                      mass=wall_mass)
 
@@ -151,3 +196,7 @@ def _rot_x(angle: float) -> np.ndarray:
 def _rot_z(angle: float) -> np.ndarray:
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+register_object_kind(ObjectKind(CATEGORY_BLOCK, _add_block_geoms, tabletop_objects.resting_height(CATEGORY_BLOCK)))
+register_object_kind(ObjectKind(CATEGORY_BOWL, _add_bowl_geoms, tabletop_objects.resting_height(CATEGORY_BOWL)))

@@ -15,6 +15,7 @@ then ``TabletopWorld('toy', seed, objects)`` or the bridge node's ``scene`` para
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import importlib.metadata
 import pathlib
 import threading
@@ -24,10 +25,12 @@ import mujoco
 from cap_tabletop import cameras as tabletop_cameras
 
 from cap_sim_bridge import scene as objects_module
+from cap_sim_bridge.ink import InkSpec
 from cap_sim_bridge.scene import ObjectSpec
 
 MODELS_DIR = pathlib.Path(__file__).resolve().parent / 'models'
 ROBOT_MJCF = 'ur5e_gripper.xml'  # the arm and gripper every scene must contain, by this include file name
+GRIPPER_MAX_OPENING = 0.085  # [m], pad to pad, of that gripper
 TABLETOP = 'tabletop'
 DEFAULT_SCENE = TABLETOP
 
@@ -47,6 +50,10 @@ class SceneSpec:
         objects_module.sample_spawn_positions
     camera_names: tuple[str, ...] = ()
     description: str = ''
+    surface_z: float = 0.0  # height of the surface objects rest on at reset [m]
+    ink: InkSpec | None = None  # a surface the tool draws on (cap_sim_bridge.ink), if the scene has one
+    extra_joints: tuple[str, ...] = ()  # passive joints of the robot's tool, published beside the arm's
+    home_gripper_opening: float = GRIPPER_MAX_OPENING  # the fingers' opening at reset [m] (open, by default)
 
 
 def robot_include() -> dict[str, bytes]:
@@ -93,11 +100,17 @@ ENTRY_POINT_GROUP = 'cap_ros.scenes'
 _entry_points_loaded = False
 
 
+# Scenes of this package beyond the table top, in modules of their own (imported when a scene is first looked up).
+BUILT_IN_SCENE_MODULES = ('cap_sim_bridge.whiteboard_scene',)
+
+
 def _load_entry_points() -> None:
     global _entry_points_loaded
     if _entry_points_loaded:
         return
     _entry_points_loaded = True
+    for module in BUILT_IN_SCENE_MODULES:
+        register_scene(importlib.import_module(module).SCENE)
     for entry in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
         spec = entry.load()
         if isinstance(spec, SceneSpec):

@@ -29,6 +29,7 @@ import numpy as np
 
 from cap_sim_bridge import camera as camera_math
 from cap_sim_bridge import scene, scenes
+from cap_sim_bridge.ink import InkCanvas, InkSurface
 from cap_sim_bridge.rendering import RgbdRenderer
 from cap_sim_bridge.scene import ObjectSpec
 from cap_sim_bridge.trajectory import JointTrajectory
@@ -46,7 +47,7 @@ TCP_OFFSET = 0.15  # tcp distance along the flange's +z [m]
 # top camera's view of the table.
 HOME_JOINT_POSITIONS = np.array([0.8413, -2.2842, 1.7017, -0.9883, -1.5708, -0.7295])
 
-GRIPPER_MAX_OPENING = 0.085  # [m], pad to pad
+GRIPPER_MAX_OPENING = scenes.GRIPPER_MAX_OPENING  # [m], pad to pad
 GRIPPER_DEFAULT_FORCE = 20.0  # [N] per finger
 GRIPPER_MAX_FORCE = 100.0
 GRIPPER_SPEED = 0.1  # [m/s] rate at which the commanded opening moves, like a real gripper's finger speed
@@ -97,6 +98,10 @@ class TabletopWorld:
         self.objects: list[ObjectSpec] = []
         self.seed = seed
         self._arm_command_serial = 0
+        # The scene's drawing surface, if it has one: the canvas outlives model changes, its surface does not.
+        self.ink_canvas: InkCanvas | None = InkCanvas(self.scene.ink) if self.scene.ink is not None else None
+        self._ink: InkSurface | None = None
+        self._uploaded_ink: dict[tuple[int, int, int, str], int] = {}  # renderer -> ink version its texture shows
         self.reset(seed, objects)
 
     # ----------------------------------------------------------------------------------------------- reset
@@ -139,9 +144,11 @@ class TabletopWorld:
             self.objects = specs
             self.seed = seed
             self._place_robot_at_home()
+            if self._ink is not None:
+                self._ink.reset()
             for spec, (x, y) in zip(specs, positions):
                 adr = self._object_qpos_adr[spec.name]
-                z = scene.resting_height(spec.category) + scene.SPAWN_CLEARANCE
+                z = self.scene.surface_z + scene.resting_height(spec.category) + scene.SPAWN_CLEARANCE
                 self.data.qpos[adr:adr + 7] = [x, y, z, 1.0, 0.0, 0.0, 0.0]
             self.data.time = previous_time
             mujoco.mj_forward(self.model, self.data)
@@ -175,6 +182,9 @@ class TabletopWorld:
         self._object_geom_set = np.zeros(model.ngeom, dtype=bool)
         for ids in self._object_geom_ids.values():
             self._object_geom_set[ids] = True
+        self._extra_qpos_adr = model.jnt_qposadr[[model.joint(n).id for n in self.scene.extra_joints]]
+        self._extra_dof_adr = model.jnt_dofadr[[model.joint(n).id for n in self.scene.extra_joints]]
+        self._ink = InkSurface(model, self.scene.ink, self.ink_canvas) if self.ink_canvas is not None else None
 
     def objects_in_model(self) -> list[str]:
         """Names of the object bodies of the current model (each has a free joint of the same name)."""
@@ -185,15 +195,16 @@ class TabletopWorld:
     def _place_robot_at_home(self) -> None:
         data = self.data
         data.qpos[self._arm_qpos_adr] = HOME_JOINT_POSITIONS
-        data.qpos[self._finger_qpos_adr] = GRIPPER_MAX_OPENING / 2
+        opening = self.scene.home_gripper_opening  # open, unless the scene's tool is held between the fingers
+        data.qpos[self._finger_qpos_adr] = opening / 2
         self._trajectory: JointTrajectory | None = None
         self._arm_command_serial += 1
         self._hold_positions = HOME_JOINT_POSITIONS.copy()
-        self._gripper_target = GRIPPER_MAX_OPENING
-        self._gripper_reference = GRIPPER_MAX_OPENING
+        self._gripper_target = opening
+        self._gripper_reference = opening
         self._set_gripper_force(GRIPPER_DEFAULT_FORCE)
         data.ctrl[self._arm_actuator_ids] = HOME_JOINT_POSITIONS
-        data.ctrl[self._gripper_actuator_id] = GRIPPER_MAX_OPENING
+        data.ctrl[self._gripper_actuator_id] = opening
 
     # -------------------------------------------------------------------------------------------- stepping
     @property
@@ -209,13 +220,19 @@ class TabletopWorld:
         """Advance the physics by n steps, updating the arm and gripper references every step."""
         with self.lock:
             model, data = self.model, self.data
+            ink = self._ink
             if self._trajectory is None and self._gripper_reference == self._gripper_target:
-                # Nothing to interpolate: the references are constant, let MuJoCo run the steps in one call.
+                # Nothing to interpolate: the references are constant, let MuJoCo run the steps in one call (the
+                # arm holds still, so the tool touches the board, if at all, where it did at the last step).
                 mujoco.mj_step(model, data, nstep=n)
+                if ink is not None:
+                    ink.update(data)
                 return
             for _ in range(n):
                 self._update_references()
                 mujoco.mj_step(model, data)
+                if ink is not None:
+                    ink.update(data)
 
     def run_for(self, duration: float) -> None:
         """Advance simulated time by duration [s] (rounded to whole steps)."""
@@ -337,6 +354,21 @@ class TabletopWorld:
             pose[:3, 3] = self.data.site_xpos[site_id]
             return pose
 
+    # ------------------------------------------------------------------------------------------------ tool
+    @property
+    def extra_joint_names(self) -> tuple[str, ...]:
+        """The scene's passive tool joints (e.g. the whiteboard's sprung marker), in extra_joint_positions order."""
+        return self.scene.extra_joints
+
+    def extra_joint_positions(self) -> np.ndarray:
+        """Positions of the scene's passive tool joints [m or rad]."""
+        with self.lock:
+            return self.data.qpos[self._extra_qpos_adr].copy()
+
+    def extra_joint_velocities(self) -> np.ndarray:
+        with self.lock:
+            return self.data.qvel[self._extra_dof_adr].copy()
+
     # --------------------------------------------------------------------------------------------- gripper
     def command_gripper(self, opening: float, max_force: float = 0.0) -> None:
         """Move the fingers to an opening [m] (0 = closed) squeezing with at most max_force [N] per finger.
@@ -455,9 +487,22 @@ class TabletopWorld:
         """
         with self.lock:
             renderer = self._renderer(width, height, quality)
+            self._show_ink(renderer, (threading.get_ident(), width, height, quality))
             renderer.update(self.data, camera)
         # The scene is a snapshot: drawing it needs no lock, so physics can go on meanwhile.
         return renderer.render(with_depth)
+
+    def _show_ink(self, renderer: RgbdRenderer, key: tuple[int, int, int, str]) -> None:
+        """Bring the board's ink texture in `renderer` up to date with the canvas (only when it changed)."""
+        ink = self._ink
+        if ink is None or ink.texture_id < 0 or self._uploaded_ink.get(key) == ink.canvas.version:
+            return
+        image, version = ink.canvas.snapshot()
+        model = self.model
+        address, size = model.tex_adr[ink.texture_id], image.size * 3
+        model.tex_data[address:address + size] = ink.canvas.texture_rgb(image).reshape(-1)
+        renderer.upload_texture(ink.texture_id)
+        self._uploaded_ink[key] = version
 
     def _renderer(self, width: int, height: int, quality: str) -> RgbdRenderer:
         key = (threading.get_ident(), width, height, quality)
@@ -468,6 +513,7 @@ class TabletopWorld:
         if renderer is None:
             renderer = RgbdRenderer(self.model, width, height, quality)
             self._renderers[key] = renderer
+            self._uploaded_ink.pop(key, None)
         return renderer
 
     def close(self) -> None:

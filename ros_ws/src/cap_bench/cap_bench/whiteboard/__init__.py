@@ -1,0 +1,1 @@
+"""`cap bench whiteboard`: drawing and erasing on the simulated whiteboard, judged on the ink."""
