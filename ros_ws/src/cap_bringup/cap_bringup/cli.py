@@ -5,7 +5,7 @@
     cap send "put the red block in the blue bowl"   run a command, follow it to the end (exit 0: it ran to the end)
     cap stop                                         stop the running program and every motion
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
-    cap demo                                         the table-top demo (see cap_bringup/demo.py)
+    cap demo [whiteboard]                            the table-top demo (cap_bringup/demo.py), or the whiteboard one
     cap bench tabletop --trials 1                    the paper's table-top benchmark (see cap_bench/runner.py)
 
 Every command takes --namespace (the graph's names are relative; `cap send --namespace robot1 "..."` talks to the
@@ -458,7 +458,8 @@ def build_parser() -> argparse.ArgumentParser:
                       'a second graph beside it another')
     p_up.add_argument('--domain', default='tabletop', help='the domain whose prompts, robot API and scene run '
                       '[tabletop]')
-    commands.add_parser('demo', help='run the table-top demo (options: cap demo --help)', add_help=False)
+    commands.add_parser('demo', help='run the table-top demo, or `cap demo whiteboard` the whiteboard session '
+                        '(options: cap demo [whiteboard] --help)', add_help=False)
     commands.add_parser('bench', help='the paper\'s benchmarks: tabletop, codegen, humaneval, reasoning (cap bench '
                         '--help)', add_help=False)
     p_send = commands.add_parser('send', help='run a natural-language command and follow it to the end',

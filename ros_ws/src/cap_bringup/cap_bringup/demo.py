@@ -1,6 +1,7 @@
 """The table-top demo: a sequence of plain-language commands run through the whole graph in simulation.
 
     python -m cap_bringup.demo [--out DIR] [--backend cassette|http] [--cassette FILE] [--record] [--perception rgbd]
+    cap demo [tabletop] [...]         the same;  cap demo whiteboard [...]: the whiteboard session (whiteboard_demo.py)
 
 By default every answer comes from the demo cassette of hand-written reference programs (no network, no model). With
 `--backend http` the same commands go to an OpenAI-compatible endpoint (CAP_LLM_BASE_URL, CAP_LLM_MODEL,
@@ -118,13 +119,13 @@ STEPS = (
 
 
 class VideoRecorder:
-    """Renders the front camera every `period` of simulated time and writes an MP4 (H.264 via imageio-ffmpeg)."""
+    """Renders a camera every `period` of simulated time and writes an MP4 (H.264 via imageio-ffmpeg)."""
 
     def __init__(self, world, path: pathlib.Path, period: float = 0.2, fps: int = 15,
-                 size: tuple[int, int] = (640, 480)) -> None:
+                 size: tuple[int, int] = (640, 480), camera: str = 'front') -> None:
         import imageio_ffmpeg
 
-        self.world, self.period, self.size = world, period, size
+        self.world, self.period, self.size, self.camera = world, period, size, camera
         self._writer = imageio_ffmpeg.write_frames(str(path), size, fps=fps, macro_block_size=8,
                                                    output_params=['-loglevel', 'error'])
         self._writer.send(None)
@@ -139,7 +140,7 @@ class VideoRecorder:
             if self.world.time < next_time:
                 time.sleep(0.002)
                 continue
-            rgb, _ = self.world.render('front', *self.size, with_depth=False)
+            rgb, _ = self.world.render(self.camera, *self.size, with_depth=False)
             self._writer.send(np.ascontiguousarray(rgb))
             self.frames += 1
             next_time += self.period
@@ -275,6 +276,12 @@ def _call(future, timeout: float, what: str):
 
 
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ['whiteboard']:  # `cap demo whiteboard`: the whiteboard domain's session
+        from cap_bringup import whiteboard_demo
+        return whiteboard_demo.main(argv[1:])
+    if argv[:1] == ['tabletop']:
+        argv = argv[1:]
     parser = argparse.ArgumentParser(prog='cap-demo', description=__doc__.split('\n\n')[0])
     parser.add_argument('--out', type=pathlib.Path,
                         default=pathlib.Path('output') / time.strftime('demo-%Y%m%d-%H%M%S'))

@@ -43,8 +43,10 @@ PLACES: dict[str, tuple[float, float]] = {**CORNERS, **SIDES, 'middle': MIDDLE}
 
 
 def on_board(x: float, y: float, margin: float = 0.0) -> bool:
-    """Whether (x, y) lies on the board, at least `margin` inside its edges."""
-    return X_RANGE[0] + margin <= x <= X_RANGE[1] - margin and Y_RANGE[0] + margin <= y <= Y_RANGE[1] - margin
+    """Whether (x, y) lies on the board, at least `margin` inside its edges (a point computed exactly on a limit,
+    such as -0.64 - 0.05, is on it)."""
+    inside = margin - 1e-9
+    return X_RANGE[0] + inside <= x <= X_RANGE[1] - inside and Y_RANGE[0] + inside <= y <= Y_RANGE[1] - inside
 
 
 def world_to_ink(xy: np.ndarray) -> np.ndarray:

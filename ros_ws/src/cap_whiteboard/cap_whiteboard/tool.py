@@ -26,7 +26,9 @@ TOOLS = (TOOL_MARKER, TOOL_ERASER)
 MARKER_JOINT = 'marker_joint'
 ERASER_JOINT = 'eraser_joint'
 
-MARKER_TIP_OFFSET = 0.20  # tip from the flange along its +z, spring at rest [m]
+# Tip from the flange along its +z, spring at rest [m]: 8 cm beyond the fingertips, so that the fingers pass over the
+# objects a shape is drawn around (an apple is 6 cm tall).
+MARKER_TIP_OFFSET = 0.24
 MARKER_TIP_WIDTH = 0.003  # width of the line the tip draws [m]
 MARKER_RADIUS = 0.008  # the pen's barrel [m]
 GRIP_OPENING = 2 * MARKER_RADIUS  # the fingers closed on the barrel [m]
