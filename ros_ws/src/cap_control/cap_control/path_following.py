@@ -159,22 +159,21 @@ class PathPlan:
 
 
 # ----------------------------------------------------------------------------------------------- geometry
-def tool_pose(tool: str, xyz: Sequence[float], yaw: float) -> np.ndarray:
-    """World pose of the tool frame touching (or hovering over) `xyz`, pointing down, turned by `yaw`."""
-    return top_down_pose(xyz, yaw)
+def _flange_to_tool(tool: str) -> np.ndarray:
+    """flange_T_tool of `tool`; with TOOL_NONE the marker's tip is the point that follows the path."""
+    return tools.flange_to_tool(TOOL_ERASER if tool == TOOL_ERASER else TOOL_MARKER)
 
 
 def flange_pose(tool: str, xyz: Sequence[float], yaw: float) -> np.ndarray:
-    """World pose of the flange that puts `tool`'s touching point at `xyz`, pointing down (TOOL_NONE: the marker)."""
-    flange_to_tool = tools.flange_to_tool(TOOL_ERASER if tool == TOOL_ERASER else TOOL_MARKER)
-    return tool_pose(tool, xyz, yaw) @ np.linalg.inv(flange_to_tool)
+    """World pose of the flange that puts `tool`'s touching point at `xyz`, pointing down, turned by `yaw`."""
+    return top_down_pose(xyz, yaw) @ np.linalg.inv(_flange_to_tool(tool))
 
 
 def choose_yaw(tool: str, points: np.ndarray, z: float) -> float:
     """The tool's yaw for a whole request: of eight yaws, the one whose joint solutions at the path's centre and
     extremes lie nearest the UR5e's ready pose (elbow up, wrist down over the table), so every stroke starts on
-    that branch and turns the wrist least. The marker is round and the eraser square enough that any yaw draws
-    or wipes the same; reachability decides."""
+    that branch and turns the wrist least. The marker is round, and the eraser's pad (3 x 6 cm) covers a 3 mm line
+    whichever way it is turned; reachability decides."""
     probes = np.vstack([np.mean(points, axis=0), points[np.argmin(points[:, 0])], points[np.argmax(points[:, 0])],
                         points[np.argmin(points[:, 1])], points[np.argmax(points[:, 1])]])
     best = None
@@ -348,7 +347,7 @@ def _follow(q: np.ndarray, tool: str, samples: np.ndarray, z: float, yaw: float,
             cartesian_limits: CartesianLimits, config: PathConfig) -> JointTrajectory:
     """Along a stroke's samples at height z: each smooth piece timed along its length, from rest to rest."""
     parts = []
-    to_flange = np.linalg.inv(tools.flange_to_tool(TOOL_ERASER if tool == TOOL_ERASER else TOOL_MARKER))
+    to_flange = np.linalg.inv(_flange_to_tool(tool))
     for piece in split_at_corners(samples, config.corner_angle):
         if len(piece) < 2:
             continue
@@ -358,7 +357,7 @@ def _follow(q: np.ndarray, tool: str, samples: np.ndarray, z: float, yaw: float,
 
         def poses_at(s: np.ndarray, piece: np.ndarray = piece, along: np.ndarray = along) -> np.ndarray:
             x, y = np.interp(s, along, piece[:, 0]), np.interp(s, along, piece[:, 1])
-            return np.array([tool_pose(tool, (xi, yi, z), yaw) @ to_flange for xi, yi in zip(x, y)])
+            return np.array([top_down_pose((xi, yi, z), yaw) @ to_flange for xi, yi in zip(x, y)])
 
         part = timed_cartesian_path(q, poses_at, length, 0.0, limits, cartesian_limits, tool_offset=0.0,
                                     max_joint_step=config.max_joint_step)
@@ -369,5 +368,5 @@ def _follow(q: np.ndarray, tool: str, samples: np.ndarray, z: float, yaw: float,
 
 def tool_tip_positions(trajectory: JointTrajectory, tool: str) -> np.ndarray:
     """(N, 3) world positions of the tool's touching point along a trajectory (the commanded path)."""
-    flange_to_tool = tools.flange_to_tool(TOOL_ERASER if tool == TOOL_ERASER else TOOL_MARKER)
+    flange_to_tool = _flange_to_tool(tool)
     return np.array([(forward_kinematics(q, 0.0) @ flange_to_tool)[:3, 3] for q in trajectory.positions])
