@@ -47,6 +47,9 @@ class SceneSpec:
         objects_module.sample_spawn_positions
     camera_names: tuple[str, ...] = ()
     description: str = ''
+    # initialize(model, data, seed): the scene's own seeded start state after the robot and objects are placed
+    # (e.g. a cart-pole's initial lean); None: nothing.
+    initialize: Callable[[mujoco.MjModel, mujoco.MjData, int], None] | None = None
 
 
 def robot_include() -> dict[str, bytes]:
