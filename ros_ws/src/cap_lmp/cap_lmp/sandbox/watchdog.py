@@ -46,7 +46,8 @@ class Watchdog:
         self.memory_baseline = resident_bytes() if memory_baseline is None else memory_baseline
         self.next_memory_check = 0.0
         self.stopped: StopSignal | None = None
-        # A call of generated code made by the host within the run (a controller's tick) and its own deadline.
+        # A call of generated code made by the host within the run (a controller's tick): its deadline in this
+        # thread's CPU time.
         self.call_deadline: float | None = None
         self._call_text = ''
         self.tracer = self.trace  # one bound method, so `sys.gettrace() is self.tracer` is a cheap identity test
@@ -82,11 +83,12 @@ class Watchdog:
 
     @contextmanager
     def call_budget(self, seconds: float, what: str) -> Iterator[None]:
-        """The host calls generated code (a controller function, once per tick) that may take at most `seconds`:
-        past them the call is stopped (StopSignal, reason 'call_budget'). The stop stays, like any stop, unless the
+        """The host calls generated code (a controller function, once per tick) that may take at most `seconds` of
+        this thread's CPU time (what the code costs, whatever else the machine runs meanwhile; generated code cannot
+        sleep or wait): past them the call is stopped (StopSignal, reason 'call_budget'). The stop stays, like any stop, unless the
         host caught it as it left the call and says so with `resume_after_call_stop()`; a stop that generated code
         swallowed thus still ends the run. The run's own time limit and cancel hold inside the call too."""
-        self.call_deadline = time.monotonic() + max(float(seconds), 0.0)
+        self.call_deadline = time.thread_time() + max(float(seconds), 0.0)
         self._call_text = f'{what} took longer than its time budget of {seconds * 1000:.3g} ms and was stopped'
         try:
             yield
@@ -111,7 +113,7 @@ class Watchdog:
         if self.cancel_event.is_set():
             self._stop('the program was cancelled', 'cancelled')
         now = time.monotonic()
-        if self.call_deadline is not None and now > self.call_deadline:
+        if self.call_deadline is not None and time.thread_time() > self.call_deadline:
             self._stop(self._call_text, 'call_budget')
         if now > self.deadline:
             self._stop(f'the program ran longer than the time limit of {self.limits.time_limit_s:g} s and was '
