@@ -399,16 +399,28 @@ class TabletopWorld:
             self.data.ctrl[ids] = np.asarray(values, dtype=float)
 
     def controls(self, actuators: Sequence[str]) -> np.ndarray:
-        """The named actuators' controls now, and (the same order) the forces they apply."""
+        """The named actuators' controls now (a motor's commanded force or torque; the physics clamps it to the
+        actuator's range)."""
         with self.lock:
             ids = [self.model.actuator(name).id for name in actuators]
-            return self.data.actuator_force[ids].copy()
+            return self.data.ctrl[ids].copy()
 
     def joint_state(self, joints: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
         """(positions, velocities) of the named one-degree-of-freedom joints (hinges and slides)."""
         with self.lock:
             ids = [self.model.joint(name).id for name in joints]
             return self.data.qpos[self.model.jnt_qposadr[ids]].copy(), self.data.qvel[self.model.jnt_dofadr[ids]].copy()
+
+    def joint_efforts(self, joints: Sequence[str]) -> np.ndarray:
+        """What the actuators apply to each named joint now (generalized force: N for a slide, N m for a hinge)."""
+        with self.lock:
+            ids = [self.model.joint(name).id for name in joints]
+            return self.data.qfrc_actuator[self.model.jnt_dofadr[ids]].copy()
+
+    @property
+    def arm_actuator_names(self) -> tuple[str, ...]:
+        """The arm's actuators, in ARM_JOINT_NAMES order."""
+        return tuple(self.model.actuator(int(i)).name for i in self._arm_actuator_ids)
 
     def scene_joint_names(self) -> list[str]:
         """The scene's own one-degree-of-freedom joints (a cart-pole's): neither the robot's nor an object's."""
