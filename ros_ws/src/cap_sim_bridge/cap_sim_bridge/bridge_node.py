@@ -4,8 +4,8 @@ driver and the cameras.
 Publishes /clock (simulated time), /joint_states, the ground-truth object array, and per camera
 <CAMERA_NAMESPACE>/<camera>/{color, depth, camera_info, pose}; serves the scene reset, a FollowJointTrajectory
 action and a GripperCommand action; for controllers, lockstep stepping of a plant (ControlStep, lockstep.py) and
-pushes on the tool (PushTool). /joint_states carries the scene's own joints too (a cart-pole's). Like a robot driver it does not listen to /cap/stop: the motion owners
-(cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it stopped. The physics
+pushes on the tool (PushTool). /joint_states carries the scene's own joints too (a cart-pole's). Like a robot
+driver it does not listen to /cap/stop: the motion owners (cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it stopped. The physics
 runs in a thread of its own (never on an executor thread); the callbacks, which may block while a motion runs, need
 a MultiThreadedExecutor with a few threads (main() uses 8). Parameters: SimBridgeConfig (cap_sim_bridge.config).
 
@@ -222,7 +222,7 @@ class SimBridgeNode(Node):
             now, ARM_JOINT_NAMES + GRIPPER_JOINT_NAMES + tuple(scene),
             np.concatenate([world.joint_positions(), world.finger_positions(), scene_positions]),
             np.concatenate([world.joint_velocities(), world.finger_velocities(), scene_velocities]),
-            np.concatenate([world.joint_efforts(), np.zeros(2), world.joint_efforts(scene)]))
+            np.concatenate([world.joint_efforts(), np.zeros(2), world.joint_actuator_forces(scene)]))
 
     # ------------------------------------------------------------------------------------------- controllers
     def _on_control_step(self, request: ControlStep.Request, response: ControlStep.Response) -> ControlStep.Response:

@@ -411,7 +411,7 @@ class TabletopWorld:
             ids = [self.model.joint(name).id for name in joints]
             return self.data.qpos[self.model.jnt_qposadr[ids]].copy(), self.data.qvel[self.model.jnt_dofadr[ids]].copy()
 
-    def joint_efforts(self, joints: Sequence[str]) -> np.ndarray:
+    def joint_actuator_forces(self, joints: Sequence[str]) -> np.ndarray:
         """What the actuators apply to each named joint now (generalized force: N for a slide, N m for a hinge)."""
         with self.lock:
             ids = [self.model.joint(name).id for name in joints]
