@@ -5,9 +5,10 @@ Publishes /clock (simulated time), /joint_states, the ground-truth object array,
 <CAMERA_NAMESPACE>/<camera>/{color, depth, camera_info, pose}; serves the scene reset, a FollowJointTrajectory
 action and a GripperCommand action; for controllers, lockstep stepping of a plant (ControlStep, lockstep.py) and
 pushes on the tool (PushTool). /joint_states carries the scene's own joints too (a cart-pole's). Like a robot
-driver it does not listen to /cap/stop: the motion owners (cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it stopped. The physics
-runs in a thread of its own (never on an executor thread); the callbacks, which may block while a motion runs, need
-a MultiThreadedExecutor with a few threads (main() uses 8). Parameters: SimBridgeConfig (cap_sim_bridge.config).
+driver it does not listen to /cap/stop: the motion owners (cap_control) cancel their goals, and a cancelled
+trajectory leaves the arm holding where it stopped. The physics runs in a thread of its own (never on an executor
+thread); the callbacks, which may block while a motion runs, need a MultiThreadedExecutor with a few threads (main()
+uses 8). Parameters: SimBridgeConfig (cap_sim_bridge.config).
 
 Idle: in real time, once no goal has run and nothing has moved for `idle_after` seconds (rest.py), /clock,
 /joint_states, the objects and the cameras drop to their idle rates (the cameras resend the frame rendered when the

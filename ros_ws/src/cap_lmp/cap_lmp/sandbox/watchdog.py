@@ -87,7 +87,8 @@ class Watchdog:
         this thread's CPU time (what the code costs, whatever else the machine runs meanwhile; generated code cannot
         sleep or wait): past them the call is stopped (StopSignal, reason 'call_budget'). The stop stays, like any
         stop, unless the host caught it as it left the call and says so with `resume_after_call_stop()`; a stop that
-        generated code swallowed thus still ends the run. The run's own time limit and cancel hold inside the call too."""
+        generated code swallowed thus still ends the run. The run's own time limit and cancel hold inside the call
+        too."""
         self.call_deadline = time.thread_time() + max(float(seconds), 0.0)
         self._call_text = f'{what} took longer than its time budget of {seconds * 1000:.3g} ms and was stopped'
         try:
