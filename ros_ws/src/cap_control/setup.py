@@ -23,6 +23,7 @@ setup(
     entry_points={
         'console_scripts': [
             'pick_place = cap_control.pick_place_node:main',
+            'controller_node = cap_control.controller_node:main',
         ],
     },
 )

@@ -25,6 +25,7 @@ import numpy as np
 
 from cap_control import kinematics
 from cap_controllers import plants
+from cap_ros_common.parameters import parameter
 from cap_controllers.plants import ArmState, PlantSpec
 
 
@@ -104,6 +105,7 @@ class Result:
     saturated_calls: int = 0
     call_seconds: list[float] = dataclasses.field(default_factory=list)  # wall time per call, as the loop saw it
     function_seconds: list[float] = dataclasses.field(default_factory=list)  # the function's own CPU time
+    step_seconds: list[float] = dataclasses.field(default_factory=list)  # wall time per plant step
     final_state: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
 
 
@@ -115,6 +117,25 @@ class Tick:
     calls: int
     state: np.ndarray
     output: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class ControllerNodeConfig:
+    """controller_node's parameters: the limits it enforces on every run (a goal may only tighten them) and how
+    long it waits for the plant and the controller."""
+
+    max_pole_angle: float = parameter(plants.POLE_ANGLE_LIMIT, "The cart-pole's largest lean [rad].")
+    max_cart_position: float = parameter(plants.RAIL_LIMIT, "The cart's largest distance from the rail's centre [m].")
+    max_joint_speed: float = parameter(plants.ARM_JOINT_SPEED_LIMIT, "The arm's fastest joint speed [rad/s].")
+    workspace_min: tuple[float, ...] = parameter(plants.ARM_WORKSPACE_MIN, "Lower corner of the tool's box [m].")
+    workspace_max: tuple[float, ...] = parameter(plants.ARM_WORKSPACE_MAX, "Upper corner of the tool's box [m].")
+    effort_stop_factor: float = parameter(plants.EFFORT_STOP_FACTOR, 'An output past this multiple of its '
+                                          "actuator's limit stops the run (a smaller excess is clamped).")
+    call_timeout: float = parameter(1.0, 'Longest wait for one call of the controller, round trip [s of wall '
+                                    'time]: a backstop for a session that does not answer; the function\'s own '
+                                    'time is bounded by the goal\'s time_budget, in the sandbox process.')
+    plant_timeout: float = parameter(2.0, 'Longest wait for one step of the plant [s of wall time].')
+    feedback_every: int = parameter(10, 'Feedback every this many ticks.')
 
 
 class RunError(ValueError):
@@ -265,7 +286,9 @@ class ControlLoop:
                 result.saturated_calls += int(saturated)
                 if feedback is not None and tick % feedback_every == 0:
                     feedback(Tick(elapsed, result.calls, vector, output))
+                stepped = self._clock()
                 reading = self.plant.step(output.tolist(), period)
+                result.step_seconds.append(self._clock() - stepped)
         except PlantError as error:
             return self._end(result, Outcome.PLANT_ERROR, str(error))
         finally:
@@ -291,6 +314,6 @@ def percentile(values: Sequence[float], share: float) -> float:
     return float(np.quantile(np.asarray(values, dtype=float), share)) if len(values) else 0.0
 
 
-__all__ = ['ControlLoop', 'Controller', 'ControllerFailure', 'Limits', 'Outcome', 'Plant', 'PlantError', 'Reading',
-           'Result', 'Run', 'RunError', 'Tick', 'check_output', 'make_run', 'percentile', 'state_vector',
-           'state_violation']
+__all__ = ['ControlLoop', 'Controller', 'ControllerFailure', 'ControllerNodeConfig', 'Limits', 'Outcome', 'Plant',
+           'PlantError', 'Reading', 'Result', 'Run', 'RunError', 'Tick', 'check_output', 'make_run', 'percentile',
+           'state_vector', 'state_violation']

@@ -121,8 +121,9 @@ class SimBridgeNode(Node):
         # Controllers: lockstep stepping of a plant, pushes on the tool.
         self._scene_joints = self.world.scene_joint_names()
         self.lockstep = Lockstep(self.world, self._real_time_factor, config.lockstep_timeout)
-        self.create_service(ControlStep, GraphNames.SIM_CONTROL_STEP_SERVICE, self._on_control_step,
-                            callback_group=callbacks)
+        self._step_node: Node = self
+        self._step_service = self.create_service(ControlStep, GraphNames.SIM_CONTROL_STEP_SERVICE,
+                                                 self._on_control_step, callback_group=callbacks)
         self.create_service(PushTool, GraphNames.SIM_PUSH_TOOL_SERVICE, self._on_push_tool, callback_group=callbacks)
         self._last_lockstep_state_wall = -math.inf
 
@@ -159,7 +160,7 @@ class SimBridgeNode(Node):
         try:
             while not self._stop.is_set():
                 if self.lockstep.active:  # a controller steps the world; a silent one loses it, made safe
-                    if self.lockstep.expired() and self.lockstep.release():
+                    if self.lockstep.expired() and self.lockstep.release(silent=True):
                         self.get_logger().warning('a controller stopped stepping the world: its plant was made safe')
                     self._woken.wait(0.01)
                     pacer.restart()
@@ -226,6 +227,15 @@ class SimBridgeNode(Node):
             np.concatenate([world.joint_efforts(), np.zeros(2), world.joint_actuator_forces(scene)]))
 
     # ------------------------------------------------------------------------------------------- controllers
+    def bind_quick(self, node: Node) -> None:
+        """Serve ControlStep from `node` (before the first controller): a graph that spins a small node on a fast
+        executor answers a controller's steps there, not on this node's executor, which action goals keep busy."""
+        old_node, old = self._step_node, self._step_service
+        self._step_service = node.create_service(ControlStep, GraphNames.SIM_CONTROL_STEP_SERVICE,
+                                                 self._on_control_step)
+        self._step_node = node
+        old_node.destroy_service(old)
+
     def _on_control_step(self, request: ControlStep.Request, response: ControlStep.Response) -> ControlStep.Response:
         try:
             if request.action == ControlStep.Request.RELEASE:

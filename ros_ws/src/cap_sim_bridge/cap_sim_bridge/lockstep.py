@@ -33,6 +33,7 @@ class Lockstep:
         self._actuators: list[str] = []
         self._last_request = 0.0
         self.active = False
+        self._dropped = ''  # why the last controller lost the plant for its silence (told at its next step)
 
     def step(self, joints: Sequence[str], actuators: Sequence[str], efforts: Sequence[float],
              duration: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
@@ -47,6 +48,12 @@ class Lockstep:
             raise ValueError(f'a step lasts 0 to {MAX_STEP_DURATION:g} s of simulated time, not {duration}')
         world = self.world
         with self._lock:
+            if self._dropped:
+                # The controller that fell silent must not carry on as if nothing happened; a new run starts with
+                # a step that only reads (no efforts), which clears this.
+                dropped, self._dropped = self._dropped, ''
+                if efforts.size:
+                    raise ValueError(dropped)
             with world.lock:
                 try:
                     for name in joints:
@@ -81,13 +88,18 @@ class Lockstep:
             world.set_arm_torque_mode(True)
         self._actuators = list(actuators)
         self._pacer.restart()
+        self._last_request = time.monotonic()  # before `active`: the physics loop reads both without the lock
         self.active = True
 
-    def release(self) -> bool:
-        """Make the plant safe and hand the world back to the physics loop; False if nothing was stepped."""
+    def release(self, silent: bool = False) -> bool:
+        """Make the plant safe and hand the world back to the physics loop; False if nothing was stepped.
+        `silent`: the controller stopped asking (its next step is refused, saying so)."""
         with self._lock:
             if not self.active:
                 return False
+            if silent:
+                self._dropped = (f'the plant was made safe after {self.timeout_s:g} s without a step from its '
+                                 'controller')
             world = self.world
             with world.lock:
                 arm = set(world.arm_actuator_names)
