@@ -131,7 +131,7 @@ class ControllerNodeConfig:
     workspace_max: tuple[float, ...] = parameter(plants.ARM_WORKSPACE_MAX, "Upper corner of the tool's box [m].")
     effort_stop_factor: float = parameter(plants.EFFORT_STOP_FACTOR, 'An output past this multiple of its '
                                           "actuator's limit stops the run (a smaller excess is clamped).")
-    call_timeout: float = parameter(1.0, 'Longest wait for one call of the controller, round trip [s of wall '
+    call_timeout: float = parameter(2.0, 'Longest wait for one call of the controller, round trip [s of wall '
                                     'time]: a backstop for a session that does not answer; the function\'s own '
                                     'time is bounded by the goal\'s time_budget, in the sandbox process.')
     plant_timeout: float = parameter(2.0, 'Longest wait for one step of the plant [s of wall time].')

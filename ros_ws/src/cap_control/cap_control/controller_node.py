@@ -43,10 +43,14 @@ CODES = {Outcome.SUCCESSFUL: RunController.Result.SUCCESSFUL, Outcome.STOPPED: R
 
 
 def _wait(future, timeout_s: float):
-    """The result of an rclpy future another thread's executor completes; None when it did not within timeout_s."""
+    """The result of an rclpy future another thread's executor completes; None when it did not within timeout_s.
+
+    A future already done when the callback is added hands the callback to its executor as a task, which an events
+    executor with nothing else to do may not run for a long time (in lockstep nothing else happens): hence the
+    look at `done()` once the callback is in place."""
     done = threading.Event()
     future.add_done_callback(lambda _: done.set())
-    if not done.wait(timeout_s):
+    if not future.done() and not done.wait(timeout_s):
         future.cancel()
         return None
     return future.result()
@@ -112,6 +116,7 @@ class ControllerNode(Node):
         self._joints: dict[str, tuple[float, float]] = {}  # latest /joint_states: name -> (position, velocity)
         self._joints_lock = threading.Lock()
         self.last_result: Any = None  # control_loop.Result of the last run
+        self._first_joints = threading.Event()
         self.create_subscription(Empty, GraphNames.STOP_TOPIC, lambda _: self._stop.set(), STOP_QOS,
                                  callback_group=self._group)
         self.create_subscription(JointState, GraphNames.JOINT_STATES_TOPIC, self._on_joint_states, STATE_QOS,
@@ -147,6 +152,7 @@ class ControllerNode(Node):
         with self._joints_lock:
             for name, position, velocity in zip(message.name, message.position, message.velocity):
                 self._joints[name] = (position, velocity)
+        self._first_joints.set()
 
     def _on_plant_state(self, request: GetPlantState.Request, response: GetPlantState.Response):
         try:
@@ -154,6 +160,7 @@ class ControllerNode(Node):
         except ValueError as error:
             response.success, response.message = False, str(error)
             return response
+        self._first_joints.wait(self.config.plant_timeout)  # just started: the simulator's first state is near
         with self._joints_lock:
             known = [self._joints.get(name) for name in spec.joints]
         if any(value is None for value in known):

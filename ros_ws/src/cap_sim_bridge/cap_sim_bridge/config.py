@@ -41,7 +41,7 @@ class SimBridgeConfig:
     goal_time_tolerance: float = parameter(trajectory_goal.DEFAULT_GOAL_TIME_TOLERANCE,
                                            "Default time after a trajectory's end to meet the goal tolerance [s].")
     gripper_timeout: float = parameter(5.0, 'Longest gripper motion [s of simulated time].')
-    lockstep_timeout: float = parameter(3.0, 'A controller stepping a plant (ControlStep) that sends no request for '
+    lockstep_timeout: float = parameter(5.0, 'A controller stepping a plant (ControlStep) that sends no request for '
                                              'this long [s of wall time] loses it: the plant is made safe and the '
                                              'simulation runs freely again.')
 

@@ -428,7 +428,7 @@ class TabletopWorld:
             model = self.model
             robot = set(ARM_JOINT_NAMES) | set(GRIPPER_JOINT_NAMES)
             return [model.joint(j).name for j in range(model.njnt)
-                    if model.jnt_type[j] in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE)
+                    if int(model.jnt_type[j]) in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
                     and model.joint(j).name not in robot]
 
     def release_holds(self) -> list[str]:

@@ -62,3 +62,7 @@ def test_unknown_names_are_refused(world):
     with pytest.raises(ValueError, match='unknown joint or actuator'):
         lockstep.step(['no_such_joint'], [], [], 0.0)
     assert not lockstep.active
+
+
+def test_the_scene_names_its_own_joints(world):
+    assert world.scene_joint_names() == list(plants.CARTPOLE_JOINTS)
