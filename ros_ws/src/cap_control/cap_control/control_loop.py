@@ -101,6 +101,7 @@ class Result:
     outcome: Outcome
     message: str
     simulated_time: float = 0.0
+    start_time: float = 0.0  # [s] the plant's clock at the first tick
     calls: int = 0
     saturated_calls: int = 0
     call_seconds: list[float] = dataclasses.field(default_factory=list)  # wall time per call, as the loop saw it
@@ -256,7 +257,7 @@ class ControlLoop:
         output = np.zeros(len(plant.actuators))
         try:
             reading = self.plant.step([], 0.0)
-            start = reading.time
+            start = result.start_time = reading.time
             for tick in range(ticks + 1):
                 elapsed = reading.time - start
                 vector = state_vector(plant, elapsed, reading)

@@ -49,6 +49,7 @@ class Watchdog:
         # A call of generated code made by the host within the run (a controller's tick): its deadline in this
         # thread's CPU time.
         self.call_deadline: float | None = None
+        self._call_wall_deadline = 0.0
         self._call_text = ''
         self.tracer = self.trace  # one bound method, so `sys.gettrace() is self.tracer` is a cheap identity test
 
@@ -90,6 +91,9 @@ class Watchdog:
         generated code swallowed thus still ends the run. The run's own time limit and cancel hold inside the call
         too."""
         self.call_deadline = time.thread_time() + max(float(seconds), 0.0)
+        # CPU time never runs ahead of wall time: until the wall clock has passed the budget, the CPU clock (a
+        # system call) need not be read.
+        self._call_wall_deadline = time.monotonic() + max(float(seconds), 0.0)
         self._call_text = f'{what} took longer than its time budget of {seconds * 1000:.3g} ms and was stopped'
         try:
             yield
@@ -114,7 +118,8 @@ class Watchdog:
         if self.cancel_event.is_set():
             self._stop('the program was cancelled', 'cancelled')
         now = time.monotonic()
-        if self.call_deadline is not None and time.thread_time() > self.call_deadline:
+        if self.call_deadline is not None and now > self._call_wall_deadline and \
+                time.thread_time() > self.call_deadline:
             self._stop(self._call_text, 'call_budget')
         if now > self.deadline:
             self._stop(f'the program ran longer than the time limit of {self.limits.time_limit_s:g} s and was '
