@@ -54,12 +54,13 @@ def write_oracle_cassette(episodes: Sequence[ControllerEpisode], path: pathlib.P
     cassette.save()
 
 
-def _wait(predicate, timeout: float) -> bool:
+def _wait(predicate, timeout: float, period: float = 0.01) -> bool:
+    """Poll `predicate` every `period` s (this thread shares the interpreter with the graph: it polls gently)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if predicate():
             return True
-        time.sleep(0.002)
+        time.sleep(period)
     return predicate()
 
 
@@ -79,6 +80,7 @@ class Runner:
         self.push = self.node.create_client(PushTool, GraphNames.SIM_PUSH_TOOL_SERVICE)
         self._lock = threading.Lock()
         self.samples: list[tuple[float, np.ndarray]] = []  # (time, arm joint positions)
+        self.latest = 0.0  # the newest sample's time
         self.node.create_subscription(JointState, GraphNames.JOINT_STATES_TOPIC, self._on_joints, 100)
         if not (self.execute.wait_for_server(timeout_sec=30.0) and self.reset.wait_for_service(timeout_sec=30.0)):
             raise RuntimeError('the graph did not come up')
@@ -87,12 +89,13 @@ class Runner:
         index = {name: i for i, name in enumerate(message.name)}
         if all(name in index for name in plants.ARM_JOINTS):
             q = np.array([message.position[index[name]] for name in plants.ARM_JOINTS])
+            stamp = to_seconds(message.header.stamp)
             with self._lock:
-                self.samples.append((to_seconds(message.header.stamp), q))
+                self.samples.append((stamp, q))
+            self.latest = stamp
 
     def _latest_time(self) -> float:
-        with self._lock:
-            return self.samples[-1][0] if self.samples else 0.0
+        return self.latest
 
     def _call(self, future, what: str):
         if not _wait(future.done, 30.0):
