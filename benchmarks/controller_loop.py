@@ -8,6 +8,7 @@ and prints one JSON object per command with, over every call of the run:
   client, lmp_node's service, the socket to the sandbox process and back, the function): p50, p99, max;
 - function_ms: the function's own CPU time in the sandbox process (what its time budget bounds): p50, p99, max;
 - step_ms: one plant step (ControlStep request to answer: the simulator advancing 10 ms in lockstep): p50, p99;
+  with --real-time it includes the simulator's wait for the wall clock, so a tick then lasts about one period;
 - tick_ms: call + step, what one period costs, beside the period (10 ms at 100 Hz) and the budget share used;
 - wall_s / simulated_s: the run as fast as possible, and the real-time factor it reached;
 - outcome: the run's end (a 30 s balance is a success only if the pole stayed within its limits throughout).
