@@ -134,7 +134,7 @@ def _invoker(channel: _Channel, engine: Any) -> Callable[[dict[str, Any]], dict[
         channel.invoking = True
         started = time.thread_time()  # the budget is CPU time too (Watchdog.call_budget)
         try:
-            with watchdog.call_budget(float(budget), f'the controller {name}'):
+            with watchdog.call_budget(float(budget), f'{name}()'):
                 reply['value'] = function(*args)
             wire.encode(reply)  # a value that cannot travel is the function's error
         except StopSignal as stop:  # the budget, the run's limit or a cancel: the parent stops the loop

@@ -113,7 +113,7 @@ class RosControllersApi:
         numbers = (rate, duration, time_budget)
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in numbers):
             raise RobotApiError('rate, duration and time_budget must be numbers')
-        goal = RunController.Goal(controller=function.name, handle=function.id, plant=str(plant), rate=float(rate),
+        goal = RunController.Goal(controller=f'{function.name}()', handle=function.id, plant=str(plant), rate=float(rate),
                                   duration=float(duration), time_budget=float(time_budget))
         if not self._run.wait_for_server(timeout_sec=self.service_timeout_s):
             raise RobotApiError(f'the controller node ({self._run._action_name}) is not running')
@@ -136,7 +136,7 @@ class RosControllersApi:
         result = wrapped.result
         where = f'; {SAFE.get(goal.plant, "the plant was made safe")}'
         if result.error_code == RunController.Result.STOPPED or self.stop_requested.is_set():
-            raise StoppedError(f'{function.name} was stopped: {result.error_msg}{where}')
+            raise StoppedError(f'{function.name}() was stopped: {result.error_msg}{where}')
         if result.error_code != RunController.Result.SUCCESSFUL:
             raise RobotApiError(f'{result.error_msg}{where}')
         return {'simulated_time': result.simulated_time, 'calls': int(result.calls),
