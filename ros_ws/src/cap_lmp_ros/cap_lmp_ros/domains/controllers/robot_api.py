@@ -113,8 +113,8 @@ class RosControllersApi:
         numbers = (rate, duration, time_budget)
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in numbers):
             raise RobotApiError('rate, duration and time_budget must be numbers')
-        goal = RunController.Goal(controller=f'{function.name}()', handle=function.id, plant=str(plant), rate=float(rate),
-                                  duration=float(duration), time_budget=float(time_budget))
+        goal = RunController.Goal(controller=f'{function.name}()', handle=function.id, plant=str(plant),
+                                  rate=float(rate), duration=float(duration), time_budget=float(time_budget))
         if not self._run.wait_for_server(timeout_sec=self.service_timeout_s):
             raise RobotApiError(f'the controller node ({self._run._action_name}) is not running')
         with self._lock:
