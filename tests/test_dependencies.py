@@ -18,7 +18,7 @@ SRC = pathlib.Path(__file__).resolve().parents[1] / 'ros_ws' / 'src'
 
 LAYERS = {
     'cap_interfaces': 0,
-    'cap_ros_common': 1, 'cap_tabletop': 1, 'cap_whiteboard': 1,
+    'cap_ros_common': 1, 'cap_tabletop': 1, 'cap_whiteboard': 1, 'cap_controllers': 1,
     'cap_lmp': 2, 'cap_perception': 2, 'cap_control': 2, 'cap_sim_bridge': 2,
     'cap_lmp_ros': 3,
     'cap_bringup': 4,

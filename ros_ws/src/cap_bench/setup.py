@@ -31,6 +31,7 @@ setup(
             'humaneval = cap_bench.humaneval.bench:main',
             'reasoning = cap_bench.reasoning.bench:main',
             'devset = cap_bench.devset.bench:main',
+            'controllers = cap_bench.controllers.bench:main',
         ],
     },
 )

@@ -9,7 +9,8 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test']),
     package_data={'cap_lmp_ros.domains.tabletop': ['prompts/*.txt', 'cassettes/*.yaml'],
-                  'cap_lmp_ros.domains.whiteboard': ['prompts/*.txt', 'cassettes/*.yaml']},
+                  'cap_lmp_ros.domains.whiteboard': ['prompts/*.txt', 'cassettes/*.yaml'],
+                  'cap_lmp_ros.domains.controllers': ['prompts/*.txt', 'cassettes/*.yaml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

@@ -28,5 +28,9 @@ setup(
             'sim_bridge = cap_sim_bridge.bridge_node:main',
             'cap_sim_render = cap_sim_bridge.render_cli:main',
         ],
+        # Scenes found by the scene registry in every process (cap_sim_bridge.scenes).
+        'cap_ros.scenes': [
+            'controllers = cap_sim_bridge.controller_scene:SCENE',
+        ],
     },
 )

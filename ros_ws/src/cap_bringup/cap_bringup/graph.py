@@ -304,6 +304,18 @@ class Graph:
                 self.client_nodes.append(clients)
                 quick.add_node(clients)
                 bind_perception(clients)
+            # A controller's loop asks once per tick (controller_node's clients of the plant's step and of the
+            # controller's call, the simulator's step service): nodes with such endpoints move them onto a node of
+            # the events executor too (`bind_quick`).
+            for name, node in self.nodes.items():
+                bind_quick = getattr(node, 'bind_quick', None)
+                if bind_quick is None:
+                    continue
+                endpoints = rclpy.create_node(f'{name}_quick', context=context, parameter_overrides=sim_time,
+                                              **placed)
+                self.client_nodes.append(endpoints)
+                quick.add_node(endpoints)
+                bind_quick(endpoints)
         except BaseException:
             self.close()
             raise

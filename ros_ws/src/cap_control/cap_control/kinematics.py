@@ -79,6 +79,24 @@ def forward_kinematics(q: Sequence[float], tool_offset: float = DEFAULT_TOOL_OFF
     return pose @ _tool_transform(tool_offset)
 
 
+def jacobian(q: Sequence[float], tool_offset: float = DEFAULT_TOOL_OFFSET) -> np.ndarray:
+    """Geometric Jacobian (6x6) of the TCP in the world frame: rows 0-2 map joint velocities to the TCP's linear
+    velocity, rows 3-5 to its angular velocity (every joint turns about the z axis of the DH frame before it)."""
+    q = np.asarray(q, dtype=float)
+    if q.shape != (6,):
+        raise ValueError(f'expected 6 joint angles, got shape {q.shape}')
+    frames = [np.eye(4)]
+    for i in range(6):
+        frames.append(frames[-1] @ _dh_transform(q[i], DH_D[i], DH_A[i], DH_ALPHA[i]))
+    tcp = (frames[-1] @ _tool_transform(tool_offset))[:3, 3]
+    result = np.zeros((6, 6))
+    for i in range(6):
+        axis, origin = frames[i][:3, 2], frames[i][:3, 3]
+        result[:3, i] = np.cross(axis, tcp - origin)
+        result[3:, i] = axis
+    return result
+
+
 def _wrap(angle: float) -> float:
     """Angle in (-pi, pi]."""
     return math.atan2(math.sin(angle), math.cos(angle))

@@ -619,6 +619,15 @@ class Engine:
             return f'the generated {origin} program'
         return f'the generated {origin}'
 
+    def error_text(self, error: BaseException) -> str:
+        """'Type: message (line N of <program>: `source`)' for an exception raised by generated code that the host
+        called (a controller function's tick); built with bounded work."""
+        text = f'{type(error).__name__}: {bounded_exception_text(error)}'
+        line, source_line, origin = self._locate(error)
+        if line is not None and source_line:
+            text += f' (line {line} of {origin}: `{source_line}`)'
+        return text
+
     def _locate(self, error: BaseException) -> tuple[int | None, str | None, str]:
         """Line of generated code where the error arose: the innermost frame that belongs to a generated program."""
         found: tuple[int | None, str | None, str] = (None, None, '')

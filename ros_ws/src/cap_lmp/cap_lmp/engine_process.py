@@ -10,6 +10,13 @@ socket itself, also for the reply to a request (a hand-off between threads would
 call). The control socket carries only cancel; a thread of its own watches it, and its closing means the parent is
 gone.
 
+Functions as arguments: a robot API function named in the setup's `function_arguments` may be passed a function of
+the program (`run_controller(f, ...)`); it travels as a handle ({'$callable': id, 'name': ...}), and while that
+call waits for its reply the parent may ask for the function to be called ('invoke': handle, arguments, time
+budget), answered with 'invoke_result' (value or error, and the call's own time). The call runs on the program's
+thread under its watchdog, with the budget as a deadline of its own (Watchdog.call_budget); robot calls and model
+requests from inside it are refused. Handles end with the robot call they were passed to.
+
 No rclpy and no model client here: the robot and the model live in the parent, behind the `call` and `complete`
 messages, so this process needs no network, and the parent measures the model's time exactly (its reply carries
 that time, which the watchdog excludes from the program's time, as the parent's clock does).
@@ -46,6 +53,10 @@ class _Channel:
         self._ids = itertools.count(1)
         self.waiting_for_parent = threading.Event()  # an API call is out: the parent is busy, not us
         self.call_seconds: list[float] = []  # round trips as the program sees them, reported with each result
+        self.handles: dict[int, Callable[..., Any]] = {}  # functions passed to the robot call that is out
+        self._handle_ids = itertools.count(1)
+        self.on_invoke: Callable[[dict[str, Any]], dict[str, Any]] | None = None
+        self.invoking = False  # a function passed to a robot call runs for the parent
 
     def send(self, message: dict[str, Any]) -> None:
         data = wire.encode(message)
@@ -56,12 +67,19 @@ class _Channel:
         return wire.decode(self._connection.recv_bytes(wire.MAX_MESSAGE_BYTES))
 
     def request(self, message: dict[str, Any]) -> dict[str, Any]:
-        """Send a request to the parent and wait for its reply (which must answer this request)."""
+        """Send a request to the parent and wait for its reply (which must answer this request); meanwhile answer
+        the parent's 'invoke' messages (calls of the functions this request passed)."""
+        if self.invoking:
+            raise RobotApiError('a controller function cannot call the robot or ask the model: it gets the state '
+                                'from its arguments or the state functions, and returns its output')
         request_id = message['id'] = next(self._ids)
         self.send(message)
         self.waiting_for_parent.set()
         try:
             reply = self.receive()
+            while reply.get('op') == 'invoke' and self.on_invoke is not None:
+                self.send(self.on_invoke(reply))
+                reply = self.receive()
         except (EOFError, OSError, wire.WireError):
             os._exit(0)  # the parent is gone (or spoke nonsense): nothing here is worth keeping
         finally:
@@ -70,17 +88,77 @@ class _Channel:
             raise RobotApiError('the node answered out of turn')
         return reply
 
-    def call(self, name: str, args: tuple, kwargs: dict) -> Any:
+    def call(self, name: str, args: tuple, kwargs: dict, functions: bool = False) -> Any:
+        """A robot API call; with `functions`, the program's functions among its arguments travel as handles."""
         started = time.perf_counter()
+        if functions:
+            args = tuple(self._export(value) for value in args)
+            kwargs = {key: self._export(value) for key, value in kwargs.items()}
         try:
             reply = self.request({'op': 'call', 'name': name, 'args': list(args), 'kwargs': kwargs})
         except wire.WireError as error:
             raise TypeError(f'{name}: {error}') from None
+        finally:
+            self.handles.clear()
         self.call_seconds.append(time.perf_counter() - started)
         error = reply.get('error')
         if error:
             raise API_ERRORS.get(str(error.get('type')), RobotApiError)(str(error.get('message', '')))
         return reply.get('value')
+
+
+    def _export(self, value: Any) -> Any:
+        """A function becomes a handle the parent can invoke while this call is out; anything else as it is."""
+        if not callable(value) or isinstance(value, type):
+            return value
+        handle = next(self._handle_ids)
+        self.handles[handle] = value
+        return {wire.CALLABLE_KEY: handle, 'name': str(getattr(value, '__name__', 'function'))[:200]}
+
+
+def _invoker(channel: _Channel, engine: Any) -> Callable[[dict[str, Any]], dict[str, Any]]:
+    """The answer to the parent's 'invoke': call the handle's function on this (the program's) thread, under the
+    run's watchdog with the message's time budget."""
+    from cap_lmp.sandbox.watchdog import StopSignal
+
+    def invoke(message: dict[str, Any]) -> dict[str, Any]:
+        reply: dict[str, Any] = {'op': 'invoke_result', 'id': message.get('id'), 'seconds': 0.0}
+        function = channel.handles.get(message.get('handle'))
+        args, budget = message.get('args'), message.get('budget_s')
+        watchdog = engine.sandbox.watchdog
+        if function is None or not isinstance(args, list) or watchdog is None or \
+                not isinstance(budget, (int, float)) or isinstance(budget, bool) or not budget > 0:
+            reply['error'] = {'type': 'RobotApiError', 'message': 'no such function of the running program'}
+            return reply
+        name = str(getattr(function, '__name__', 'the controller'))
+        channel.invoking = True
+        started = time.thread_time()  # the budget is CPU time too (Watchdog.call_budget)
+        try:
+            with watchdog.call_budget(float(budget), f'{name}()'):
+                reply['value'] = function(*args)
+            wire.encode(reply)  # a value that cannot travel is the function's error
+        except StopSignal as stop:  # the budget, the run's limit or a cancel: the parent stops the loop
+            if stop.reason == 'call_budget':
+                watchdog.resume_after_call_stop()  # only this call ends; the program gets the parent's verdict
+            reply.pop('value', None)
+            reply['error'] = {'type': 'ControllerOverrun' if stop.reason == 'call_budget' else 'ExecutionStopped',
+                              'message': str(stop)}
+        except wire.WireError as error:
+            reply.pop('value', None)
+            reply['error'] = {'type': 'TypeError', 'message': f'{name} returned a value that cannot be sent: {error}'}
+        except Exception as error:  # the function's own exception, reported with its line
+            reply.pop('value', None)
+            try:
+                text = engine.error_text(error)
+            except Exception:
+                text = type(error).__name__
+            reply['error'] = {'type': type(error).__name__, 'message': text[:2000]}
+        finally:
+            channel.invoking = False
+            reply['seconds'] = time.thread_time() - started
+        return reply
+
+    return invoke
 
 
 class _ParentModel:
@@ -109,9 +187,9 @@ class _ParentModel:
                           latency_s=float(value['latency_s']), source=str(value['source']))
 
 
-def _proxy(channel: _Channel, name: str) -> Callable[..., Any]:
+def _proxy(channel: _Channel, name: str, functions: bool = False) -> Callable[..., Any]:
     def call_robot(*args: Any, **kwargs: Any) -> Any:
-        return channel.call(name, args, kwargs)
+        return channel.call(name, args, kwargs, functions)
     call_robot.__name__ = name
     return call_robot
 
@@ -133,7 +211,8 @@ def _build_engine(setup: dict[str, Any], channel: _Channel):
     module, _, name = str(setup['build_engine']).partition(':')
     build_engine = getattr(importlib.import_module(module), name)
     limits = SandboxLimits(**setup.get('limits', {}))
-    api = {name: _proxy(channel, name) for name in setup['api']}
+    takes_functions = set(setup.get('function_arguments') or ())
+    api = {name: _proxy(channel, name, name in takes_functions) for name in setup['api']}
     return build_engine(api, _ParentModel(channel), limits, **dict(setup.get('engine_options') or {}))
 
 
@@ -141,6 +220,7 @@ def serve(connection: Connection, control: Connection) -> None:
     channel = _Channel(connection)
     setup = channel.receive()
     engine = _build_engine(setup, channel)
+    channel.on_invoke = _invoker(channel, engine)
     _limit_address_space(int(setup.get('address_space_extra_bytes', 0)))
     # The jail comes last of the setup (the engine's modules are loaded, the memory cap is set) and before the
     # threads start: Landlock and the capability drop bind the calling thread and the threads it starts later.

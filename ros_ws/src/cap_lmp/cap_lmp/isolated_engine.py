@@ -193,6 +193,32 @@ def _result(values: Any) -> CommandResult:
     return CommandResult(**fields)
 
 
+@dataclasses.dataclass(frozen=True)
+class CallableHandle:
+    """A function of the running program, passed to a robot API call (`run_controller(f, ...)`): the robot function
+    receives this instead, and may call the function through IsolatedEngine.invoke until it returns."""
+
+    id: int
+    name: str
+
+
+class InvokeError(Exception):
+    """A call of the program's function through a handle failed; `kind` names why (the function's exception type,
+    'ControllerOverrun' past its budget or without an answer in time, 'NotRunning', 'SandboxProcessLost')."""
+
+    def __init__(self, kind: str, message: str) -> None:
+        super().__init__(message)
+        self.kind = kind
+
+
+def _imported(value: Any) -> Any:
+    """A robot call's argument as the robot function gets it: a function's handle becomes a CallableHandle."""
+    if isinstance(value, dict) and set(value) == {wire.CALLABLE_KEY, 'name'} and \
+            isinstance(value[wire.CALLABLE_KEY], int) and isinstance(value['name'], str):
+        return CallableHandle(value[wire.CALLABLE_KEY], value['name'][:200])
+    return value
+
+
 # required: the process does not start without the whole jail; best_effort: what the kernel offers, the rest
 # reported in the log; off: no jail (a kernel or container where it gets in the way).
 JAIL_MODES = ('required', 'best_effort', 'off')
@@ -217,7 +243,8 @@ class IsolatedEngine:
 
     `build_engine(api, client, limits, **engine_options)` builds the session's Engine in the sandbox process (a
     module-level function: it travels by its module and name); `engine_options` must be JSON values, and
-    `model_time_limit_s` is passed to it as well.
+    `model_time_limit_s` is passed to it as well. The robot functions named in `function_arguments` may be passed
+    functions of the program: they receive a CallableHandle and may call it with invoke() while they run.
     """
 
     def __init__(self, build_engine: Callable[..., Any], api: Mapping[str, Callable[..., Any]], client: LLMClient,
@@ -225,7 +252,8 @@ class IsolatedEngine:
                  stall_limit_s: float = 10.0,
                  cancel_grace_s: float = 2.0, start_timeout_s: float = 60.0, send_timeout_s: float = 5.0,
                  model_time_limit_s: float = 120.0, address_space_extra_bytes: int | None = None,
-                 jail: str = 'required', child_command: Sequence[str] | None = None) -> None:
+                 jail: str = 'required', child_command: Sequence[str] | None = None,
+                 function_arguments: Sequence[str] = ()) -> None:
         if jail not in JAIL_MODES:
             raise ValueError(f'jail must be one of {", ".join(JAIL_MODES)}, not {jail!r}')
         self.limits = limits or SandboxLimits()
@@ -238,6 +266,8 @@ class IsolatedEngine:
             'op': 'setup', 'api': sorted(self._api), 'build_engine': builder_reference(build_engine),
             'engine_options': {**(engine_options or {}), 'model_time_limit_s': model_time_limit_s},
             'jail': jail,
+            # Robot functions that take a function of the program (as a CallableHandle, see invoke()).
+            'function_arguments': sorted(set(function_arguments) & set(self._api)),
             'limits': dataclasses.asdict(self.limits),
             # Room for the program's own data (the sandbox's limit) plus the allocator's and libraries' slack.
             'address_space_extra_bytes': (address_space_extra_bytes if address_space_extra_bytes is not None
@@ -265,6 +295,10 @@ class IsolatedEngine:
         self._poller: select.poll | None = None
         self._ready = False  # the process answered the setup
         self._clock = _Clock()  # of the command running (or the last one)
+        # Calls of the program's functions (invoke) from other threads, while a robot call of it is out.
+        self._invoke_lock = threading.Lock()
+        self._call_open = False  # a robot call of the program is being answered: invoke may use the socket
+        self._invoke_ids = 0
         self._start()
 
     # -------------------------------------------------------------------------------------------- process
@@ -504,6 +538,8 @@ class IsolatedEngine:
                         self._keep_call_times(message.get('api_call_seconds'))
                         self._time(result, clock)
                         return result
+                    elif op == 'invoke_result':
+                        pass  # the late answer of a call that invoke() stopped waiting for
                     elif op != 'alive':
                         raise _ProcessLost('protocol')
                 # Every pass checks, so a process that floods messages is bounded too.
@@ -626,8 +662,16 @@ class IsolatedEngine:
         if function is None or not isinstance(args, list) or not isinstance(kwargs, dict):
             reply['error'] = {'type': 'RobotApiError', 'message': f'there is no robot function {str(name)[:100]!r}'}
             return wire.encode(reply)
+        args = [_imported(value) for value in args]
+        kwargs = {key: _imported(value) for key, value in kwargs.items()}
+        with self._invoke_lock:
+            self._call_open = True
         try:
-            reply['value'] = function(*args, **kwargs)
+            try:
+                reply['value'] = function(*args, **kwargs)
+            finally:
+                with self._invoke_lock:  # waits for a call of the program's function in flight
+                    self._call_open = False
             return wire.encode(reply)  # a value that cannot travel is an error of the call, not of the channel
         except Exception as error:  # every failure of a robot call goes back to the program that made it
             reply.pop('value', None)
@@ -635,6 +679,62 @@ class IsolatedEngine:
                         'RobotApiError')
             reply['error'] = {'type': kind, 'message': str(error)[:2000]}
             return wire.encode(reply)
+
+    # -------------------------------------------------------------------------------------------- invoke
+    def invoke(self, handle: CallableHandle | int, args: Sequence[Any], budget_s: float,
+               timeout_s: float) -> tuple[Any, float]:
+        """Call a function the running program passed to the robot call being answered now (from another thread
+        than the one answering it): (its value, its own time in the sandbox process [s]).
+
+        The function runs in the sandbox process under the program's watchdog with `budget_s` as its deadline;
+        this side waits `timeout_s` at most. Raises InvokeError (`kind` says why) for the function's exception,
+        a stop past the budget, no answer in time, or no robot call of the program being answered.
+        """
+        handle_id = handle.id if isinstance(handle, CallableHandle) else int(handle)
+        deadline = time.monotonic() + timeout_s
+        if not self._invoke_lock.acquire(timeout=max(timeout_s, 0.0)):
+            raise InvokeError('ControllerOverrun', f'the previous call did not end within {timeout_s:g} s')
+        try:
+            if not self._call_open or self._data is None:
+                raise InvokeError('NotRunning', 'no program is waiting for its function to be called')
+            self._invoke_ids += 1
+            invoke_id = self._invoke_ids
+            try:
+                self._send({'op': 'invoke', 'id': invoke_id, 'handle': handle_id, 'args': list(args),
+                            'budget_s': float(budget_s)})
+                while True:
+                    message = self._receive(max(0.0, min(0.05, deadline - time.monotonic())))
+                    if message is not None:
+                        op = message.get('op')
+                        if op == 'invoke_result' and message.get('id') == invoke_id:
+                            return self._invoke_result(message)
+                        if op in ('call', 'complete'):  # refused by the process itself; a hostile one gets this
+                            self._send({'op': 'reply', 'id': message.get('id'), 'error': {
+                                'type': 'RobotApiError', 'message': 'not from inside a controller function'}})
+                        elif op not in ('alive', 'invoke_result'):
+                            raise _ProcessLost('protocol')
+                    if self._process is None or self._process.poll() is not None:
+                        raise _ProcessLost('crashed')
+                    if time.monotonic() > deadline:
+                        raise InvokeError('ControllerOverrun', f'the function did not answer within {timeout_s:g} s')
+            except (_ProcessLost, wire.WireError, ValueError, TypeError) as error:
+                reason = error.reason if isinstance(error, _ProcessLost) else 'protocol'
+                raise InvokeError('SandboxProcessLost', f'the sandbox process failed during the call ({reason})') \
+                    from None
+        finally:
+            self._invoke_lock.release()
+
+    @staticmethod
+    def _invoke_result(message: dict[str, Any]) -> tuple[Any, float]:
+        seconds = message.get('seconds')
+        seconds = float(seconds) if isinstance(seconds, (int, float)) and not isinstance(seconds, bool) else 0.0
+        error = message.get('error')
+        if error is not None:
+            if not isinstance(error, dict):
+                raise _ProcessLost('protocol')
+            raise InvokeError(_text(error.get('type', 'RobotApiError'), 100),
+                              wire_text(_text(error.get('message', ''), 2000), 2000))
+        return message.get('value'), seconds
 
     def _lost(self, command: str, code: str, started: float, reason: str) -> CommandResult:
         exit_text = self._end_process()  # kill first: a stalled process is not waited for

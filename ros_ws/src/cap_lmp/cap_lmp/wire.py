@@ -33,6 +33,8 @@ API_ERRORS: dict[str, type[Exception]] = {
     'StoppedError': StoppedError, 'RobotApiError': RobotApiError, 'ValueError': ValueError,
     'TypeError': TypeError, 'KeyError': KeyError, 'IndexError': IndexError, 'RuntimeError': RuntimeError,
 }
+# A function passed to a robot API call travels as {CALLABLE_KEY: handle, 'name': its name} (engine_process.py).
+CALLABLE_KEY = '$callable'
 MAX_ITEMS = 200_000  # values (list items, array elements) in one message
 _ARRAY_KEY = '__ndarray__'
 # Only plain numeric arrays cross the boundary: no object, string or structured dtypes.

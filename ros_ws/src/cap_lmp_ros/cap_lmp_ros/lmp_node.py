@@ -147,7 +147,8 @@ class LmpNode(Node):
             isolated = IsolatedEngine(self.domain.build_engine, api, client, limits,
                                       stall_limit_s=config.stall_limit_s,
                                       model_time_limit_s=config.model_time_limit_s, jail=config.jail,
-                                      engine_options={'regenerations': config.regenerations})
+                                      engine_options={'regenerations': config.regenerations},
+                                      function_arguments=self.domain.function_arguments)
             where = f'sandbox process {isolated.pid}'
             self.engine = isolated
         else:
@@ -155,6 +156,9 @@ class LmpNode(Node):
                                                    regenerations=config.regenerations)
             where = 'in-process sandbox'
         self.engine.add_listener(self._on_engine_event)
+        bind_engine = getattr(self.robot, 'bind_engine', None)
+        if bind_engine is not None:  # a binding that calls the program's functions (a controller's ticks)
+            bind_engine(self.engine)
         self.queue = CommandQueue(config.max_queued_commands)
         self._current: Job | None = None
         self._closing = False

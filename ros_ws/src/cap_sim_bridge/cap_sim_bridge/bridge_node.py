@@ -1,14 +1,15 @@
 """sim_bridge: the MuJoCo world (a registered scene, by default the table top) on ROS 2, standing in for the robot
 driver and the cameras.
 
-Publishes /clock (simulated time), /joint_states (the arm, the fingers and a scene's passive tool joints, such as
-the whiteboard's sprung marker), the ground-truth object array, per camera <CAMERA_NAMESPACE>/<camera>/{color,
+Publishes /clock (simulated time), /joint_states (the arm, the fingers and the scene's own joints: a cart-pole's, the
+whiteboard tool's sprung slides), the ground-truth object array, per camera <CAMERA_NAMESPACE>/<camera>/{color,
 depth, camera_info, pose}, and in a scene with a whiteboard its ink (SIM_INK_TOPIC when it changes, at most
 `ink_rate` times a second of simulated time, and a PNG from SIM_GET_INK_SERVICE); serves the scene reset, a
-FollowJointTrajectory action and a GripperCommand action. Like a robot driver it does not listen to /cap/stop: the
-motion owners (cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it stopped.
-The physics runs in a thread of its own (never on an executor thread); the callbacks, which may block while a motion
-runs, need a MultiThreadedExecutor with a few threads (main() uses 8). Parameters: SimBridgeConfig
+FollowJointTrajectory action and a GripperCommand action; for controllers, lockstep stepping of a plant
+(ControlStep, lockstep.py) and pushes on the tool (PushTool). Like a robot driver it does not listen to /cap/stop:
+the motion owners (cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it
+stopped. The physics runs in a thread of its own (never on an executor thread); the callbacks, which may block
+while a motion runs, need a MultiThreadedExecutor with a few threads (main() uses 8). Parameters: SimBridgeConfig
 (cap_sim_bridge.config).
 
 Idle: in real time, once no goal has run and nothing has moved for `idle_after` seconds (rest.py), /clock,
@@ -44,7 +45,7 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 
 from cap_interfaces.action import FollowJointTrajectory, GripperCommand
 from cap_interfaces.msg import GraphNames, ObjectArray
-from cap_interfaces.srv import GetInk, ResetScene
+from cap_interfaces.srv import ControlStep, GetInk, PushTool, ResetScene
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.time import duration_msg, time_msg
 from cap_sim_bridge import ros_conversions as conv
@@ -52,6 +53,7 @@ from cap_sim_bridge import trajectory_goal
 from cap_sim_bridge.pacing import Pacer
 from cap_sim_bridge.rest import RestWatch
 from cap_sim_bridge.config import SimBridgeConfig, cameras_to_publish
+from cap_sim_bridge.lockstep import Lockstep
 from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES, TabletopWorld
 
 STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -112,7 +114,6 @@ class SimBridgeNode(Node):
             self._ink_pub = self.create_publisher(Image, GraphNames.SIM_INK_TOPIC, LATCHED_QOS)
             self.create_service(GetInk, GraphNames.SIM_GET_INK_SERVICE, self._on_get_ink, callback_group=callbacks)
         self._ink_rate = config.ink_rate
-        self._joint_names = ARM_JOINT_NAMES + GRIPPER_JOINT_NAMES + self.world.extra_joint_names
         self._trajectory_server = ActionServer(
             self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION,
             lambda handle: self._while_running(self._execute_trajectory, handle),
@@ -123,6 +124,15 @@ class SimBridgeNode(Node):
             lambda handle: self._while_running(self._execute_gripper, handle),
             goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
             callback_group=callbacks)
+
+        # Controllers: lockstep stepping of a plant, pushes on the tool.
+        self._scene_joints = self.world.scene_joint_names()
+        self.lockstep = Lockstep(self.world, self._real_time_factor, config.lockstep_timeout)
+        self._step_node: Node = self
+        self._step_service = self.create_service(ControlStep, GraphNames.SIM_CONTROL_STEP_SERVICE,
+                                                 self._on_control_step, callback_group=callbacks)
+        self.create_service(PushTool, GraphNames.SIM_PUSH_TOOL_SERVICE, self._on_push_tool, callback_group=callbacks)
+        self._last_lockstep_state_wall = -math.inf
 
         self._publish_scene()
         self._stop = threading.Event()
@@ -157,6 +167,12 @@ class SimBridgeNode(Node):
         idle_frames: list[tuple[Any, ...]] | None = None  # the camera messages rendered when idling began
         try:
             while not self._stop.is_set():
+                if self.lockstep.active:  # a controller steps the world; a silent one loses it, made safe
+                    if self.lockstep.expired() and self.lockstep.release(silent=True):
+                        self.get_logger().warning('a controller stopped stepping the world: its plant was made safe')
+                    self._woken.wait(0.01)
+                    pacer.restart()
+                    continue
                 if self._woken.is_set():
                     self._woken.clear()
                     rest.wake()
@@ -169,14 +185,7 @@ class SimBridgeNode(Node):
                 with world.lock:
                     world.step(steps)
                     now = world.time
-                    joints = conv.joint_state_msg(
-                        now, self._joint_names,
-                        np.concatenate([world.joint_positions(), world.finger_positions(),
-                                        world.extra_joint_positions()]),
-                        np.concatenate([world.joint_velocities(), world.finger_velocities(),
-                                        world.extra_joint_velocities()]),
-                        np.concatenate([world.joint_efforts(), np.zeros(2 + len(world.extra_joint_names))])) \
-                        if publish_state else None
+                    joints = self._joint_states(now) if publish_state else None
                     objects = world.object_states() if now >= next_objects and objects_rate > 0 and \
                         wall - last_objects_wall >= 1.0 / MAX_WALL_OBJECTS_RATE else None
                 if joints is not None:
@@ -218,6 +227,69 @@ class SimBridgeNode(Node):
             # Otherwise the process is shutting down (e.g. SIGTERM) and publishing failed: nothing to report.
         finally:
             world.close()
+
+    def _joint_states(self, now: float) -> JointState:
+        """The arm's, the fingers' and the scene's own joints (call with world.lock held)."""
+        world, scene = self.world, self._scene_joints
+        scene_positions, scene_velocities = world.joint_state(scene)
+        return conv.joint_state_msg(
+            now, ARM_JOINT_NAMES + GRIPPER_JOINT_NAMES + tuple(scene),
+            np.concatenate([world.joint_positions(), world.finger_positions(), scene_positions]),
+            np.concatenate([world.joint_velocities(), world.finger_velocities(), scene_velocities]),
+            np.concatenate([world.joint_efforts(), np.zeros(2), world.joint_actuator_forces(scene)]))
+
+    # ------------------------------------------------------------------------------------------- controllers
+    def bind_quick(self, node: Node) -> None:
+        """Serve ControlStep from `node` (before the first controller): a graph that spins a small node on a fast
+        executor answers a controller's steps there, not on this node's executor, which action goals keep busy."""
+        old_node, old = self._step_node, self._step_service
+        self._step_service = node.create_service(ControlStep, GraphNames.SIM_CONTROL_STEP_SERVICE,
+                                                 self._on_control_step)
+        self._step_node = node
+        old_node.destroy_service(old)
+
+    def _on_control_step(self, request: ControlStep.Request, response: ControlStep.Response) -> ControlStep.Response:
+        try:
+            if request.action == ControlStep.Request.RELEASE:
+                released = self.lockstep.release()
+                self._woken.set()
+                response.success = True
+                response.message = 'the plant was made safe' if released else 'no controller was stepping'
+                with self.world.lock:
+                    response.time = self.world.time
+                return response
+            if request.action != ControlStep.Request.STEP:
+                raise ValueError(f'unknown action {request.action}')
+            now, positions, velocities, applied = self.lockstep.step(
+                request.joint_names, request.actuator_names, request.efforts, request.duration)
+        except ValueError as error:
+            response.success = False
+            response.message = str(error)
+            return response
+        response.success = True
+        response.time = now
+        response.positions, response.velocities, response.applied = \
+            positions.tolist(), velocities.tolist(), applied.tolist()
+        wall = time.monotonic()
+        if wall - self._last_lockstep_state_wall >= 1.0 / MAX_WALL_STATE_RATE:  # the physics loop pauses meanwhile
+            self._last_lockstep_state_wall = wall
+            with self.world.lock:
+                joints = self._joint_states(now)
+            self._clock_pub.publish(Clock(clock=time_msg(now)))
+            self._joint_pub.publish(joints)
+        return response
+
+    def _on_push_tool(self, request: PushTool.Request, response: PushTool.Response) -> PushTool.Response:
+        try:
+            self.world.push_tool([request.force.x, request.force.y, request.force.z], request.duration)
+        except ValueError as error:
+            response.success, response.message = False, str(error)
+            return response
+        self._woken.set()
+        response.success = True
+        response.message = f'pushing the tool with {request.force.x:g}, {request.force.y:g}, {request.force.z:g} N ' \
+                           f'for {request.duration:g} s'
+        return response
 
     def _render_frames(self, now: float) -> list[tuple[Any, ...]]:
         """(publishers, colour, depth or None, camera_info) of every camera, rendered now."""
@@ -269,6 +341,7 @@ class SimBridgeNode(Node):
                 raise ValueError(f'unknown scene {request.scene!r}; this bridge simulates '
                                  f'"{self.world.scene_name}"')
             specs = [conv.object_spec(o) for o in request.objects]
+            self.lockstep.release()  # a reset ends a controller's hold on the world
             states = self.world.reset(request.seed, specs or None)
             self._scene_reset.set()
             self._woken.set()

@@ -43,6 +43,9 @@ class SimBridgeConfig:
     gripper_timeout: float = parameter(5.0, 'Longest gripper motion [s of simulated time].')
     ink_rate: float = parameter(5.0, 'In a scene with a whiteboard: most ink images a second of simulated time, '
                                      'sent only when the ink changed [Hz].')
+    lockstep_timeout: float = parameter(5.0, 'A controller stepping a plant (ControlStep) that sends no request for '
+                                             'this long [s of wall time] loses it: the plant is made safe and the '
+                                             'simulation runs freely again.')
 
 
 def cameras_to_publish(requested: tuple[str, ...], scene_default: tuple[str, ...],

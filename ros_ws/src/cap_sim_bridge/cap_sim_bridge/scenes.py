@@ -52,8 +52,10 @@ class SceneSpec:
     description: str = ''
     surface_z: float = 0.0  # height of the surface objects rest on at reset [m]
     ink: InkSpec | None = None  # a surface the tool draws on (cap_sim_bridge.ink), if the scene has one
-    extra_joints: tuple[str, ...] = ()  # passive joints of the robot's tool, published beside the arm's
     home_gripper_opening: float = GRIPPER_MAX_OPENING  # the fingers' opening at reset [m] (open, by default)
+    # initialize(model, data, seed): the scene's own seeded start state after the robot and objects are placed
+    # (e.g. a cart-pole's initial lean); None: nothing.
+    initialize: Callable[[mujoco.MjModel, mujoco.MjData, int], None] | None = None
 
 
 def robot_include() -> dict[str, bytes]:

@@ -143,7 +143,7 @@ def spawn_positions(specs: Sequence[ObjectSpec], seed: int) -> list[tuple[float,
 
 SCENE = SceneSpec(WHITEBOARD, build=_build, default_objects=default_objects, spawn_positions=spawn_positions,
                   camera_names=tabletop_cameras.CAMERA_NAMES, surface_z=board.SURFACE_Z, ink=INK,
-                  extra_joints=(MARKER_JOINT, ERASER_JOINT), home_gripper_opening=tool.GRIP_OPENING,
+                  home_gripper_opening=tool.GRIP_OPENING,
                   description='a whiteboard on the table, a marker and an eraser on the arm, blocks and fruit')
 
 __all__ = ['ERASER_JOINT', 'ERASER_PAD_GEOM', 'INK', 'MARKER_JOINT', 'MARKER_TIP_GEOM', 'SCENE', 'WHITEBOARD',

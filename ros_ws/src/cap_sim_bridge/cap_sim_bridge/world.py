@@ -82,6 +82,12 @@ class GripperState:
     reference_moving: bool
 
 
+@dataclasses.dataclass(frozen=True)
+class _Push:
+    force: np.ndarray  # [N] world frame, at the tcp
+    end_time: float  # [s] simulated
+
+
 class TabletopWorld:
     """The table-top simulation. See the module docstring for the threading rule."""
 
@@ -150,6 +156,8 @@ class TabletopWorld:
                 adr = self._object_qpos_adr[spec.name]
                 z = self.scene.surface_z + scene.resting_height(spec.category) + scene.SPAWN_CLEARANCE
                 self.data.qpos[adr:adr + 7] = [x, y, z, 1.0, 0.0, 0.0, 0.0]
+            if self.scene.initialize is not None:  # the scene's own seeded start (e.g. a cart-pole's lean)
+                self.scene.initialize(self.model, self.data, seed)
             self.data.time = previous_time
             mujoco.mj_forward(self.model, self.data)
             self.run_for(settle_time)
@@ -164,6 +172,11 @@ class TabletopWorld:
         # Velocity feed-forward through the position servo: ctrl = q_ref + (kv / kp) * qdot_ref.
         bias = model.actuator_biasprm[self._arm_actuator_ids]
         self._arm_feedforward = bias[:, 2] / bias[:, 1]
+        # The servos' parameters, restored when torque control ends (set_arm_torque_mode).
+        self._arm_servo_gain = model.actuator_gainprm[self._arm_actuator_ids].copy()
+        self._arm_servo_bias = bias.copy()
+        self.arm_torque_mode = False
+        self._pushes: list[_Push] = []
         self._finger_qpos_adr = model.jnt_qposadr[[model.joint(n).id for n in GRIPPER_JOINT_NAMES]]
         self._finger_dof_adr = model.jnt_dofadr[[model.joint(n).id for n in GRIPPER_JOINT_NAMES]]
         self._gripper_actuator_id = model.actuator(GRIPPER_ACTUATOR).id
@@ -182,8 +195,6 @@ class TabletopWorld:
         self._object_geom_set = np.zeros(model.ngeom, dtype=bool)
         for ids in self._object_geom_ids.values():
             self._object_geom_set[ids] = True
-        self._extra_qpos_adr = model.jnt_qposadr[[model.joint(n).id for n in self.scene.extra_joints]]
-        self._extra_dof_adr = model.jnt_dofadr[[model.joint(n).id for n in self.scene.extra_joints]]
         self._ink = InkSurface(model, self.scene.ink, self.ink_canvas) if self.ink_canvas is not None else None
 
     def objects_in_model(self) -> list[str]:
@@ -194,6 +205,10 @@ class TabletopWorld:
 
     def _place_robot_at_home(self) -> None:
         data = self.data
+        self._set_servo_parameters(torque=False)
+        self._pushes = []
+        data.xfrc_applied[:] = 0.0
+        data.ctrl[:] = 0.0  # the scene's other actuators (a cart's motor) start idle
         data.qpos[self._arm_qpos_adr] = HOME_JOINT_POSITIONS
         opening = self.scene.home_gripper_opening  # open, unless the scene's tool is held between the fingers
         data.qpos[self._finger_qpos_adr] = opening / 2
@@ -221,7 +236,7 @@ class TabletopWorld:
         with self.lock:
             model, data = self.model, self.data
             ink = self._ink
-            if self._trajectory is None and self._gripper_reference == self._gripper_target:
+            if self._trajectory is None and self._gripper_reference == self._gripper_target and not self._pushes:
                 # Nothing to interpolate: the references are constant, let MuJoCo run the steps in one call (the
                 # arm holds still, so the tool touches the board, if at all, where it did at the last step).
                 mujoco.mj_step(model, data, nstep=n)
@@ -230,6 +245,8 @@ class TabletopWorld:
                 return
             for _ in range(n):
                 self._update_references()
+                if self._pushes:
+                    self._apply_pushes()
                 mujoco.mj_step(model, data)
                 if ink is not None:
                     ink.update(data)
@@ -297,6 +314,8 @@ class TabletopWorld:
         if times.ndim != 1 or len(times) == 0 or times[0] < 0:
             raise ValueError('times must be a non-empty sequence of seconds from now, >= 0')
         with self.lock:
+            if self.arm_torque_mode:
+                raise ValueError('the arm is under torque control; a trajectory needs it back on its servos')
             limits = self.arm_joint_limits
             if np.any(positions < limits[:, 0]) or np.any(positions > limits[:, 1]):
                 raise ValueError('trajectory positions outside the joint limits')
@@ -334,6 +353,8 @@ class TabletopWorld:
     def hold(self) -> None:
         """Stop any trajectory; the arm holds where it is now."""
         with self.lock:
+            if self.arm_torque_mode:  # a hold always means the servos: torques of joint positions would be nonsense
+                self._set_servo_parameters(torque=False)
             self._trajectory = None
             self._arm_command_serial += 1
             self._hold_positions = self.joint_positions()
@@ -354,20 +375,111 @@ class TabletopWorld:
             pose[:3, 3] = self.data.site_xpos[site_id]
             return pose
 
-    # ------------------------------------------------------------------------------------------------ tool
+    # ------------------------------------------------------------------------------- torque control, joints, pushes
+    def set_arm_torque_mode(self, enabled: bool) -> None:
+        """Drive the arm's joints by torque (True: each actuator's ctrl is its joint torque [N m], within the
+        actuator's force range) or by its position servos again (False: the arm holds where it is now).
+
+        The links stay gravity-compensated in both modes, as a torque-controlled arm's own controller does.
+        """
+        with self.lock:
+            if enabled == self.arm_torque_mode:
+                return
+            if enabled:
+                self._trajectory = None
+                self._arm_command_serial += 1
+                self._set_servo_parameters(torque=True)
+                self.data.ctrl[self._arm_actuator_ids] = 0.0
+            else:
+                self._set_servo_parameters(torque=False)
+                self.hold()
+
+    def _set_servo_parameters(self, torque: bool) -> None:
+        ids = self._arm_actuator_ids
+        if torque:  # force = ctrl
+            self.model.actuator_gainprm[ids] = 0.0
+            self.model.actuator_gainprm[ids, 0] = 1.0
+            self.model.actuator_biasprm[ids] = 0.0
+        else:
+            self.model.actuator_gainprm[ids] = self._arm_servo_gain
+            self.model.actuator_biasprm[ids] = self._arm_servo_bias
+        self.arm_torque_mode = torque
+
+    def set_controls(self, actuators: Sequence[str], values: Sequence[float]) -> None:
+        """Set the named actuators' controls (a motor's force or torque); the arm's only in torque mode."""
+        with self.lock:
+            ids = [self.model.actuator(name).id for name in actuators]
+            if not self.arm_torque_mode and set(ids) & set(int(i) for i in self._arm_actuator_ids):
+                raise ValueError('the arm takes torques only in torque mode (set_arm_torque_mode(True))')
+            self.data.ctrl[ids] = np.asarray(values, dtype=float)
+
+    def controls(self, actuators: Sequence[str]) -> np.ndarray:
+        """The named actuators' controls now (a motor's commanded force or torque; the physics clamps it to the
+        actuator's range)."""
+        with self.lock:
+            ids = [self.model.actuator(name).id for name in actuators]
+            return self.data.ctrl[ids].copy()
+
+    def joint_state(self, joints: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+        """(positions, velocities) of the named one-degree-of-freedom joints (hinges and slides)."""
+        with self.lock:
+            ids = [self.model.joint(name).id for name in joints]
+            return self.data.qpos[self.model.jnt_qposadr[ids]].copy(), self.data.qvel[self.model.jnt_dofadr[ids]].copy()
+
+    def joint_actuator_forces(self, joints: Sequence[str]) -> np.ndarray:
+        """What the actuators apply to each named joint now (generalized force: N for a slide, N m for a hinge)."""
+        with self.lock:
+            ids = [self.model.joint(name).id for name in joints]
+            return self.data.qfrc_actuator[self.model.jnt_dofadr[ids]].copy()
+
     @property
-    def extra_joint_names(self) -> tuple[str, ...]:
-        """The scene's passive tool joints (e.g. the whiteboard's sprung marker), in extra_joint_positions order."""
-        return self.scene.extra_joints
+    def arm_actuator_names(self) -> tuple[str, ...]:
+        """The arm's actuators, in ARM_JOINT_NAMES order."""
+        return tuple(self.model.actuator(int(i)).name for i in self._arm_actuator_ids)
 
-    def extra_joint_positions(self) -> np.ndarray:
-        """Positions of the scene's passive tool joints [m or rad]."""
+    def scene_joint_names(self) -> list[str]:
+        """The scene's own one-degree-of-freedom joints (a cart-pole's): neither the robot's nor an object's."""
         with self.lock:
-            return self.data.qpos[self._extra_qpos_adr].copy()
+            model = self.model
+            robot = set(ARM_JOINT_NAMES) | set(GRIPPER_JOINT_NAMES)
+            return [model.joint(j).name for j in range(model.njnt)
+                    if int(model.jnt_type[j]) in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+                    and model.joint(j).name not in robot]
 
-    def extra_joint_velocities(self) -> np.ndarray:
+    def release_holds(self) -> list[str]:
+        """Let go of what the scene holds still until a controller takes it over: every equality constraint whose
+        name ends in '_hold' is switched off (a reset switches them on again). Returns their names."""
         with self.lock:
-            return self.data.qvel[self._extra_dof_adr].copy()
+            model = self.model
+            released = []
+            for index in range(model.neq):
+                name = model.equality(index).name
+                if name.endswith('_hold') and self.data.eq_active[index]:
+                    self.data.eq_active[index] = 0
+                    released.append(name)
+            return released
+
+    def push_tool(self, force: Sequence[float], duration: float) -> None:
+        """Push the tool centre point with `force` [N, world frame] for `duration` seconds of simulated time from
+        now (an external force, as a hand pushing the tool; pushes add up)."""
+        force = np.asarray(force, dtype=float)
+        if force.shape != (3,) or not np.all(np.isfinite(force)) or not duration > 0:
+            raise ValueError('a push needs a finite 3-vector force and a positive duration')
+        with self.lock:
+            self._pushes.append(_Push(force, self.time + float(duration)))
+
+    def _apply_pushes(self) -> None:
+        data = self.data
+        now = data.time
+        self._pushes = [push for push in self._pushes if push.end_time > now]
+        body = self.model.site_bodyid[self._tcp_site_id]
+        data.xfrc_applied[body] = 0.0
+        if self._pushes:
+            force = np.sum([push.force for push in self._pushes], axis=0)
+            # Applied at the tcp, not at the body's centre of mass: the moment of the offset comes along.
+            lever = data.site_xpos[self._tcp_site_id] - data.xipos[body]
+            data.xfrc_applied[body, :3] = force
+            data.xfrc_applied[body, 3:] = np.cross(lever, force)
 
     # --------------------------------------------------------------------------------------------- gripper
     def command_gripper(self, opening: float, max_force: float = 0.0) -> None:

@@ -46,6 +46,11 @@ class Watchdog:
         self.memory_baseline = resident_bytes() if memory_baseline is None else memory_baseline
         self.next_memory_check = 0.0
         self.stopped: StopSignal | None = None
+        # A call of generated code made by the host within the run (a controller's tick): its deadline in this
+        # thread's CPU time.
+        self.call_deadline: float | None = None
+        self._call_wall_deadline = 0.0
+        self._call_text = ''
         self.tracer = self.trace  # one bound method, so `sys.gettrace() is self.tracer` is a cheap identity test
 
     @contextmanager
@@ -77,6 +82,31 @@ class Watchdog:
         finally:
             sys.settrace(self.tracer)
 
+    @contextmanager
+    def call_budget(self, seconds: float, what: str) -> Iterator[None]:
+        """The host calls generated code (a controller function, once per tick) that may take at most `seconds` of
+        this thread's CPU time (what the code costs, whatever else the machine runs meanwhile; generated code cannot
+        sleep or wait): past them the call is stopped (StopSignal, reason 'call_budget'). The stop stays, like any
+        stop, unless the host caught it as it left the call and says so with `resume_after_call_stop()`; a stop that
+        generated code swallowed thus still ends the run. The run's own time limit and cancel hold inside the call
+        too."""
+        self.call_deadline = time.thread_time() + max(float(seconds), 0.0)
+        # CPU time never runs ahead of wall time: until the wall clock has passed the budget, the CPU clock (a
+        # system call) need not be read.
+        self._call_wall_deadline = time.monotonic() + max(float(seconds), 0.0)
+        self._call_text = f'{what} took longer than its time budget of {seconds * 1000:.3g} ms and was stopped'
+        try:
+            yield
+        finally:
+            self.call_deadline = None
+
+    def resume_after_call_stop(self) -> None:
+        """The host caught the call budget's stop leaving the call (nothing swallowed it): the run goes on, traced
+        again (a stop raised by the trace function switches tracing off)."""
+        if self.stopped is not None and self.stopped.reason == 'call_budget':
+            self.stopped = None
+            sys.settrace(self.tracer)
+
     def check(self) -> None:
         """Raise the stop signal if the run must end (used by the tracer and between model calls).
 
@@ -88,6 +118,9 @@ class Watchdog:
         if self.cancel_event.is_set():
             self._stop('the program was cancelled', 'cancelled')
         now = time.monotonic()
+        if self.call_deadline is not None and now > self._call_wall_deadline and \
+                time.thread_time() > self.call_deadline:
+            self._stop(self._call_text, 'call_budget')
         if now > self.deadline:
             self._stop(f'the program ran longer than the time limit of {self.limits.time_limit_s:g} s and was '
                        'stopped', 'timeout')

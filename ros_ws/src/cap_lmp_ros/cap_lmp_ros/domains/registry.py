@@ -39,6 +39,8 @@ class RobotBinding(Protocol):
     # Optional: `begin_command()`, called before each command (the table top remembers what the last one moved).
     # Optional: `bind_clients(node)` moves the binding's service and action clients onto another node; the
     # one-process graph calls it, when the binding has it, to keep those clients on its fast executor.
+    # Optional: `bind_engine(engine)`, called by lmp_node with its engine (a binding that calls the program's
+    # functions, see Domain.function_arguments).
 
 
 # build_engine(api: Mapping[str, Callable], client: LLMClient, limits: SandboxLimits | None, **options) -> Engine:
@@ -84,6 +86,9 @@ class Domain:
     scene: str
     cassette: Path
     nodes: tuple[NodeSpec, ...] = (PERCEPTION_NODE,)
+    # Robot functions that take a function of the program (a controller): they receive a handle to it, which the
+    # binding calls through the engine's invoke (IsolatedEngine).
+    function_arguments: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         builder_reference(self.build_engine)  # a one-line ValueError now, not when the sandbox process starts

@@ -1,0 +1,303 @@
+"""`cap bench controllers`: the controller templates (templates.py) through the real graph, one episode after another.
+
+Every episode goes the way of a user's command: the scene is reset with the episode's seed, the session is reset,
+the instruction is sent to lmp_node, whose program (the oracle's reference program replayed from a cassette, or a
+model's code) hands its controller to controller_node; for the push template the runner pushes the tool through the
+simulator's PushTool service one second into the run. The verdict comes from the run's end (controller_node) and the
+tool's path on /joint_states. Writes items.jsonl (one line per episode), report.json, report.md and report.png (this
+run beside the paper's claim), and prints the summary as JSON.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import signal
+import sys
+import threading
+import time
+from typing import Any, Sequence
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import Vector3
+from rclpy.action import ActionClient
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from cap_bench.charts import Bar, bar_chart
+from cap_bench.controllers import templates
+from cap_bench.controllers.templates import ControllerEpisode, Verdict
+from cap_bench.runner import Interrupted, domain_ids
+from cap_bringup.graph import Graph, GraphOptions
+from cap_control import kinematics
+from cap_controllers import plants
+from cap_interfaces.action import ExecuteCommand
+from cap_interfaces.msg import GraphNames
+from cap_interfaces.srv import PushTool, ResetScene
+from cap_lmp.cassette import ANY_CONTEXT, HAND_WRITTEN, Cassette, CassetteEntry
+from cap_lmp_ros.domains.controllers.domain import DOMAIN
+from cap_ros_common.time import to_seconds
+
+DEFAULT_OUT = 'output/bench-controllers'
+UI_LMP = 'controllers_ui'
+
+
+def write_oracle_cassette(episodes: Sequence[ControllerEpisode], path: pathlib.Path) -> None:
+    """The domain's reference cassette (its function-generation answers among them) plus each episode's program."""
+    cassette = Cassette.load(DOMAIN.cassette)
+    cassette.path = path
+    for item in episodes:
+        cassette.add(CassetteEntry(lmp=UI_LMP, query=item.instruction, context=ANY_CONTEXT, completion=item.reference,
+                                   source=f'{HAND_WRITTEN} (cap bench controllers, {item.template})'))
+    cassette.save()
+
+
+def _wait(predicate, timeout: float, period: float = 0.01) -> bool:
+    """Poll `predicate` every `period` s (this thread shares the interpreter with the graph: it polls gently)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(period)
+    return predicate()
+
+
+class Runner:
+    """One graph of the controllers domain and a client node; runs episodes one after another."""
+
+    def __init__(self, options: GraphOptions, episode_timeout_s: float) -> None:
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.graph = Graph(self.context, options)
+        self.node = rclpy.create_node('cap_bench_controllers', context=self.context)
+        self.graph.executor.add_node(self.node)
+        self.timeout_s = episode_timeout_s
+        self.execute = ActionClient(self.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
+        self.reset = self.node.create_client(ResetScene, GraphNames.SIM_RESET_SERVICE)
+        self.session = self.node.create_client(Trigger, GraphNames.RESET_SESSION_SERVICE)
+        self.push = self.node.create_client(PushTool, GraphNames.SIM_PUSH_TOOL_SERVICE)
+        self._lock = threading.Lock()
+        self.samples: list[tuple[float, np.ndarray]] = []  # (time, arm joint positions)
+        self.latest = 0.0  # the newest sample's time
+        self.node.create_subscription(JointState, GraphNames.JOINT_STATES_TOPIC, self._on_joints, 100)
+        if not (self.execute.wait_for_server(timeout_sec=30.0) and self.reset.wait_for_service(timeout_sec=30.0)):
+            raise RuntimeError('the graph did not come up')
+
+    def _on_joints(self, message: JointState) -> None:
+        index = {name: i for i, name in enumerate(message.name)}
+        if all(name in index for name in plants.ARM_JOINTS):
+            q = np.array([message.position[index[name]] for name in plants.ARM_JOINTS])
+            stamp = to_seconds(message.header.stamp)
+            with self._lock:
+                self.samples.append((stamp, q))
+            self.latest = stamp
+
+    def _latest_time(self) -> float:
+        return self.latest
+
+    def _call(self, future, what: str):
+        if not _wait(future.done, 30.0):
+            raise RuntimeError(f'{what} did not answer')
+        return future.result()
+
+    def run(self, item: ControllerEpisode) -> dict[str, Any]:
+        started = time.monotonic()
+        if not self._call(self.reset.call_async(ResetScene.Request(seed=item.seed)), 'the scene reset').success:
+            raise RuntimeError('the scene reset failed')
+        self._call(self.session.call_async(Trigger.Request()), 'the session reset')
+        controller = self.graph.nodes['controller_node']
+        controller.last_result = None
+        with self._lock:
+            self.samples.clear()
+        goal = self._call(self.execute.send_goal_async(ExecuteCommand.Goal(command=item.instruction)), 'lmp_node')
+        result = goal.get_result_async()
+        pushed_at = None
+        if item.template == templates.PUSH:
+            lockstep = self.graph.nodes['sim_bridge'].lockstep
+            if _wait(lambda: lockstep.active or result.done(), self.timeout_s) and not result.done():
+                took_over = self._latest_time()
+                if _wait(lambda: self._latest_time() >= took_over + templates.PUSH_START_S or result.done(),
+                         self.timeout_s) and not result.done():
+                    force = templates.PUSH_FORCE * np.asarray(templates.PUSH_DIRECTIONS[item.push_direction], float)
+                    request = PushTool.Request(force=Vector3(x=float(force[0]), y=float(force[1]), z=float(force[2])),
+                                               duration=templates.PUSH_DURATION_S)
+                    self._call(self.push.call_async(request), 'the push')
+                    pushed_at = self._latest_time()
+        if not _wait(result.done, self.timeout_s):
+            goal.cancel_goal_async()
+            raise RuntimeError(f'the episode did not end within {self.timeout_s:g} s')
+        answer = result.result().result
+        wall = time.monotonic() - started
+        run = controller.last_result
+        outcome = '' if answer.outcome == ExecuteCommand.Result.OUTCOME_DONE else answer.message
+        record: dict[str, Any] = {'key': item.key, 'template': item.template, 'seed': item.seed,
+                                  'instruction': item.instruction, 'code': answer.code,
+                                  'wall_seconds': round(wall, 2), 'model_calls': answer.model_calls}
+        if run is None:
+            verdict = Verdict(False, outcome or 'no controller ran', {})
+        else:
+            record.update(simulated_seconds=round(run.simulated_time, 3), calls=run.calls,
+                          call_p50_ms=_ms(run.call_seconds, 50), call_p99_ms=_ms(run.call_seconds, 99),
+                          function_p50_ms=_ms(run.function_seconds, 50),
+                          function_p99_ms=_ms(run.function_seconds, 99))
+            verdict = self._judge(item, run, outcome, pushed_at)
+        record.update(success=verdict.success, reason=verdict.reason, **verdict.figures)
+        return record
+
+    def _judge(self, item: ControllerEpisode, run: Any, outcome: str, pushed_at: float | None) -> Verdict:
+        if item.template == templates.BALANCE:
+            return templates.judge_balance(item, run.simulated_time, outcome)
+        with self._lock:
+            samples = [(t - run.start_time, kinematics.forward_kinematics(q)[:3, 3]) for t, q in self.samples
+                       if run.start_time <= t <= run.start_time + run.simulated_time + 1e-6]
+        if not samples:
+            return Verdict(False, outcome or 'no tool positions recorded', {})
+        start = samples[0][1]
+        times = [t for t, _ in samples]
+        if item.template == templates.PUSH:
+            if pushed_at is None:
+                return Verdict(False, outcome or 'the run ended before the push', {})
+            # Times as the template counts them: the push began PUSH_START_S into the run.
+            shift = templates.PUSH_START_S - (pushed_at - run.start_time)
+            return templates.judge_push(item, [t + shift for t in times], [p - start for _, p in samples], outcome)
+        return templates.judge_track(item, times, [p for _, p in samples], start, run.simulated_time, outcome)
+
+    def close(self) -> None:
+        try:
+            self.node.destroy_node()
+        finally:
+            self.graph.close()
+            self.context.try_shutdown()
+
+
+def _ms(values: Sequence[float], percent: float) -> float:
+    return round(float(np.percentile(values, percent)) * 1000, 3) if len(values) else 0.0
+
+
+def report(items: Sequence[dict[str, Any]], policy: str, wall_seconds: float, out: pathlib.Path) -> dict[str, Any]:
+    """report.json, report.md and report.png in `out`; the summary (returned)."""
+    rows = []
+    for template in templates.TEMPLATES:
+        mine = [item for item in items if item['template'] == template]
+        if not mine:
+            continue
+        passed = sum(item['success'] for item in mine)
+
+        def median(field: str) -> float:
+            values = [item[field] for item in mine if field in item]
+            return round(float(np.median(values)), 3) if values else 0.0
+
+        rows.append({'template': template, 'passed': passed, 'total': len(mine),
+                     'percent': round(100.0 * passed / len(mine), 1), 'paper_percent': templates.PAPER[template],
+                     'call_p50_ms': median('call_p50_ms'), 'call_p99_ms': median('call_p99_ms'),
+                     'function_p50_ms': median('function_p50_ms'), 'function_p99_ms': median('function_p99_ms'),
+                     'wall_seconds_per_episode': median('wall_seconds'),
+                     'failures': {item['key']: item['reason'] for item in mine if not item['success']}})
+    passed = sum(item['success'] for item in items)
+    summary = {'policy': policy, 'passed': passed, 'total': len(items),
+               'percent': round(100.0 * passed / len(items), 1) if items else 0.0,
+               'wall_seconds': round(wall_seconds, 1), 'templates': rows}
+    (out / 'report.json').write_text(json.dumps(summary, indent=2), encoding='utf-8')
+    lines = [f'# Controller benchmark: {policy}', '',
+             '| template | passed | % | paper % | call p50 / p99 [ms] | function p50 / p99 [ms] | wall / episode [s] |',
+             '|---|---|---|---|---|---|---|']
+    for row in rows:
+        paper = '—' if row['paper_percent'] is None else f"{row['paper_percent']:g}"
+        lines.append(f"| {row['template']} | {row['passed']}/{row['total']} | {row['percent']:g} | {paper} | "
+                     f"{row['call_p50_ms']:g} / {row['call_p99_ms']:g} | {row['function_p50_ms']:g} / "
+                     f"{row['function_p99_ms']:g} | {row['wall_seconds_per_episode']:g} |")
+    lines += ['', f"Total {passed}/{len(items)}; {wall_seconds:.0f} s of wall time. The paper's figure: its "
+                  'cart-pole PD controller balanced the pole for the whole episode; it gives none for impedance '
+                  'control.', '']
+    for row in rows:
+        for key, reason in row['failures'].items():
+            lines.append(f'- {key}: {reason}')
+    (out / 'report.md').write_text('\n'.join(lines) + '\n', encoding='utf-8')
+    bar_chart(out / 'report.png', [f'Controller benchmark: {policy}', f'{passed}/{len(items)} episodes'],
+              [Bar(row['template'], row['percent'], row['paper_percent'], f"{row['passed']}/{row['total']}")
+               for row in rows])
+    return summary
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog='cap bench controllers', description=__doc__.split('\n\n')[0])
+    parser.add_argument('--policy', choices=('oracle', 'llm'), default='oracle',
+                        help='oracle: the reference programs; llm: a model at an OpenAI-compatible endpoint')
+    parser.add_argument('--base-url', default='', help='for --policy llm; default CAP_LLM_BASE_URL')
+    parser.add_argument('--model', default='', help='for --policy llm; default CAP_LLM_MODEL')
+    parser.add_argument('--api', choices=('chat', 'completions'), default='chat', help='for --policy llm [chat]')
+    parser.add_argument('--templates', default=','.join(templates.TEMPLATES),
+                        help=f'comma-separated [{",".join(templates.TEMPLATES)}]')
+    parser.add_argument('--trials', type=int, default=5, help='episodes (seeds) per template [5]')
+    parser.add_argument('--base-seed', type=int, default=0, help='seed of the first trial [0]')
+    parser.add_argument('--balance-seconds', type=float, default=30.0, help='length of a balance episode [30]')
+    parser.add_argument('--real-time', action='store_true', help='simulate in real time (default: as fast as '
+                                                                  'possible)')
+    parser.add_argument('--episode-timeout', type=float, default=600.0, help='wall seconds per episode [600]')
+    parser.add_argument('--out', default=DEFAULT_OUT, help=f'output folder [{DEFAULT_OUT}]')
+    return parser
+
+
+def _raise_interrupted(signum: int, _frame: Any) -> None:
+    raise Interrupted(signum)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        chosen = [name.strip() for name in args.templates.split(',') if name.strip()]
+        episodes = [templates.episode(name, args.base_seed + trial, args.balance_seconds)
+                    for trial in range(args.trials) for name in chosen]
+    except ValueError as error:
+        print(f'cap bench controllers: error: {error}', file=sys.stderr)
+        return 2
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    options = GraphOptions(domain=DOMAIN.name, real_time=args.real_time)
+    if args.policy == 'oracle':
+        write_oracle_cassette(episodes, out / 'oracle_cassette.yaml')
+        options.cassette = str(out / 'oracle_cassette.yaml')
+        policy = 'oracle programs (reference programs replayed from a cassette, no model)'
+    else:
+        model = args.model or os.environ.get('CAP_LLM_MODEL', '')
+        options.llm_backend = 'http'
+        options.extra = {'lmp_node': {key: value for key, value in
+                                      (('base_url', args.base_url), ('model', args.model), ('api', args.api)) if value}}
+        policy = f"model {model or '(unnamed)'} at {args.base_url or os.environ.get('CAP_LLM_BASE_URL', '')}"
+    # The graph comes up in this process: keep it on a DDS domain of its own, on this host.
+    os.environ['ROS_DOMAIN_ID'] = str(domain_ids(1)[0])
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _raise_interrupted)
+    started = time.monotonic()
+    items: list[dict[str, Any]] = []
+    runner = Runner(options, args.episode_timeout)
+    try:
+        with open(out / 'items.jsonl', 'w', encoding='utf-8') as stream:
+            for index, item in enumerate(episodes, 1):
+                try:
+                    record = runner.run(item)
+                except RuntimeError as error:  # the graph did not answer: a failed episode, the run goes on
+                    record = {'key': item.key, 'template': item.template, 'seed': item.seed, 'success': False,
+                              'reason': f'the run failed: {error}'}
+                items.append(record)
+                stream.write(json.dumps(record) + '\n')
+                stream.flush()
+                verdict = 'ok' if record['success'] else f"FAILED: {record['reason'][:300]}"
+                print(f"[{index}/{len(episodes)}] {item.key}: {verdict} ({record.get('wall_seconds', 0):.1f} s)",
+                      file=sys.stderr, flush=True)
+    except Interrupted as interrupted:
+        print(f'interrupted ({interrupted}): the episodes finished so far are in {out}/items.jsonl',
+              file=sys.stderr)
+        return interrupted.exit_code
+    finally:
+        runner.close()
+    summary = report(items, policy, time.monotonic() - started, out)
+    print(json.dumps(summary))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
