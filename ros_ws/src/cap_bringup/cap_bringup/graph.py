@@ -1,4 +1,5 @@
-"""Bring up the whole table-top graph in one process: sim bridge, perception, pick-and-place and lmp_node.
+"""Bring up the whole table-top graph in one process: sim bridge, perception, pick-and-place, lmp_node and the
+visualization node (RViz's /robot_description and /cap/markers).
 
 `cap up`, the demo, the integration tests and the benchmark all start the graph as a `Graph`, so they run the same
 nodes with the same parameters (each node's defaults from its config dataclass, then its package's config/*.yaml,
@@ -32,6 +33,7 @@ from rclpy.parameter import Parameter
 
 from cap_bringup.cpu_affinity import pin_to_one_cpu
 from cap_bringup.namespaces import normalise_namespace
+from cap_bringup.visualization_node import VisualizationNode
 from cap_control.pick_place_node import PickPlaceNode
 from cap_interfaces.msg import GraphNames
 from cap_lmp_ros.domains.registry import get_domain
@@ -40,15 +42,16 @@ from cap_lmp_ros.thread_watch import ThreadWatch
 from cap_perception.perception_node import PerceptionNode
 from cap_sim_bridge.bridge_node import SimBridgeNode
 
-# (node name, package, its config file, class), in start order: the simulator first, lmp_node last.
+# (node name, package, its config file, class), in start order: the simulator first, then what serves commands.
 NODES = (
     ('sim_bridge', 'cap_sim_bridge', 'sim_bridge.yaml', SimBridgeNode),
     ('perception_node', 'cap_perception', 'perception.yaml', PerceptionNode),
     ('pick_place', 'cap_control', 'pick_place.yaml', PickPlaceNode),
     ('lmp_node', 'cap_lmp_ros', 'lmp_node.yaml', LmpNode),
+    ('visualization', 'cap_bringup', 'visualization.yaml', VisualizationNode),
 )
 # Nodes that take their time from the simulator's /clock (the simulator itself keeps the wall clock it paces by).
-SIM_TIME_NODES = ('perception_node', 'pick_place', 'lmp_node')
+SIM_TIME_NODES = ('perception_node', 'pick_place', 'lmp_node', 'visualization')
 
 
 def namespace_arguments(namespace: str) -> dict[str, Any]:
@@ -69,8 +72,12 @@ def is_quick(node_name: str, parameters: dict[str, Any]) -> bool:
     """Whether every callback of the node is quick, so that it may share the single-threaded events executor.
 
     The RGB-D detector analyses frames in perception's callbacks, which would hold its services up on that one
-    thread: with that source perception stays on the multi-threaded executor.
+    thread: with that source perception stays on the multi-threaded executor. The visualization node only sends
+    requests and handles answers, and its perception clients are woken by every perception answer of the process
+    (see Graph.__init__): it belongs there too.
     """
+    if node_name == 'visualization':
+        return True
     return node_name == 'perception_node' and parameters.get('source', 'ground_truth') != 'rgbd'
 
 
@@ -102,6 +109,7 @@ class GraphOptions:
             # A camera sees a fresh stack only once the tool has moved out of its line of sight.
             'pick_place': {'clear_view': self.perception == 'rgbd'},
             'lmp_node': lmp,
+            'visualization': {'scene': get_domain(self.domain).scene},
         }
         for node in SIM_TIME_NODES:
             values[node]['use_sim_time'] = True
