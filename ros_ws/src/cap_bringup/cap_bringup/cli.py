@@ -2,6 +2,8 @@
 
     cap up --seed 3                                  bring up the whole simulated graph (Ctrl-C stops it)
     cap up --namespace robot1                        ... with every name under /robot1 (a second robot beside)
+    cap up --console                                 ... and the web console at http://127.0.0.1:8765/
+    cap console --port 8765                          the web console of a graph that is up (cap_bringup/console)
     cap send "put the red block in the blue bowl"   run a command, follow it to the end (exit 0: it ran to the end)
     cap stop                                         stop the running program and every motion
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
@@ -340,10 +342,79 @@ def choose_backend(backend: str, model_file: str = '', cassette: str = '') -> st
     return 'local' if local_model_installed(model_file) else 'cassette'
 
 
+def console(port: int, namespace: str = '') -> int:
+    """Serve the web console of the graph (in this namespace) on 127.0.0.1:`port` until Ctrl-C or SIGTERM.
+
+    Exits 0 when stopped, 2 when the port cannot be had (one line says so).
+    """
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.signals import SignalHandlerOptions
+
+    from cap_bringup.console.node import ConsoleNode
+
+    signals = _signals()
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        try:
+            node = ConsoleNode(context=context, namespace=normalise_namespace(namespace),
+                               parameter_overrides=[Parameter('port', value=port)])
+        except OSError as error:
+            _error(f'error: {one_line(str(error))}')
+            return EXIT_UNREACHABLE
+        executor.add_node(node)
+        _say(f'console: {node.url}  (Ctrl-C stops it)')
+        while not signals.event.is_set() and context.ok():
+            executor.spin_once(timeout_sec=0.2)
+        return EXIT_OK
+    finally:
+        executor.shutdown(timeout_sec=0)
+        if node is not None:
+            node.destroy_node()
+        context.try_shutdown()
+
+
+def _start_console(port: int, namespace: str, graph_cpu: int, allowed: list[int]) -> Any:
+    """`cap console` as a process of its own beside the graph, on the CPUs (of `allowed`, the process' CPUs before
+    the graph pinned it) the graph is not pinned to: its web server and JPEG encoding then never take the graph's
+    interpreter lock or its CPU."""
+    import subprocess
+
+    command = [sys.executable, '-m', 'cap_bringup.cli', 'console', '--port', str(port)]
+    if namespace:
+        command += ['--namespace', namespace]
+    process = subprocess.Popen(command, stdin=subprocess.DEVNULL)
+    others = [cpu for cpu in allowed if cpu != allowed[graph_cpu % len(allowed)]] if len(allowed) > 1 else []
+    if others:
+        try:
+            os.sched_setaffinity(process.pid, others)
+        except OSError:  # the process ended already (its error is on stderr) or the CPU is not ours
+            pass
+    return process
+
+
+def _end_console(process: Any) -> None:
+    if process is None or process.poll() is not None:
+        return
+    process.terminate()
+    try:
+        process.wait(5.0)
+    except Exception:  # it did not end: kill it
+        process.kill()
+        process.wait()
+
+
 def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, cassette: str,
        record: bool, namespace: str = '', domain: str = 'tabletop', cpu: int = 0, model_file: str = '',
-       model_threads: int = 1) -> int:
-    """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM.
+       model_threads: int = 1, console_port: int | None = None) -> int:
+    """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM (and,
+    with `console_port`, the web console in a process of its own beside it).
 
     Exits 0 when stopped by a signal, FATAL_EXIT_CODE (70) when a thread the graph depends on died (the graph no
     longer answered), 2 when the graph cannot be built as configured (one line says what to set).
@@ -361,6 +432,8 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     graph = None
+    console_process = None
+    allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else []  # before the pin
     backend = choose_backend(backend, model_file, cassette)
     lmp: dict[str, Any] = {}
     if backend == 'local':
@@ -377,6 +450,8 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
         except (ValueError, CapLLMError) as error:  # a configuration the user can fix: say what, in one line
             _error(f'error: {one_line(str(error))}')
             return EXIT_UNREACHABLE
+        if console_port is not None and signals.received is None:
+            console_process = _start_console(console_port, namespace, cpu, allowed)
         if signals.received is None:
             where = f', namespace {graph.namespace}' if graph.namespace else ''
             flag = f' --namespace {graph.namespace.lstrip("/")}' if graph.namespace else ''
@@ -389,6 +464,7 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
         _say('shutting down')
         return EXIT_OK
     finally:
+        _end_console(console_process)
         if graph is not None:
             graph.close()
         context.try_shutdown()
@@ -458,6 +534,13 @@ def build_parser() -> argparse.ArgumentParser:
                       'a second graph beside it another')
     p_up.add_argument('--domain', default='tabletop', help='the domain whose prompts, robot API and scene run '
                       '[tabletop]')
+    p_up.add_argument('--console', action='store_true', help='also serve the web console (cap console) on '
+                      '127.0.0.1, in a process of its own')
+    p_up.add_argument('--console-port', type=int, default=8765, help='port of the web console [8765]')
+    p_console = commands.add_parser('console', help='serve the web console of a running graph on 127.0.0.1: '
+                                    'cameras, commands, code, approval, stop')
+    p_console.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
+    p_console.add_argument('--port', type=int, default=8765, help='port on 127.0.0.1; 0: a free one [8765]')
     commands.add_parser('demo', help='run the table-top demo (options: cap demo --help)', add_help=False)
     commands.add_parser('bench', help='the paper\'s benchmarks: tabletop, codegen, humaneval, reasoning (cap bench '
                         '--help)', add_help=False)
@@ -499,7 +582,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     _signals()  # from here on SIGINT / SIGTERM end the command cleanly (rclpy's imports take a while)
     if args.command == 'up':
         return up(args.seed, args.objects, not args.fast, args.perception, args.backend, args.cassette, args.record,
-                  args.namespace, args.domain, args.cpu, args.model_file, args.model_threads)
+                  args.namespace, args.domain, args.cpu, args.model_file, args.model_threads,
+                  args.console_port if args.console else None)
+    if args.command == 'console':
+        return console(args.port, args.namespace)
     if args.command == 'send':
         return send(args.text, args.wait, args.timeout, namespace=args.namespace)
     if args.command == 'stop':

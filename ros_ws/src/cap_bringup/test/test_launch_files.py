@@ -43,7 +43,8 @@ def test_there_is_a_launch_file():
 @pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda path: path.name)
 def test_every_node_is_an_installed_executable_with_its_config(path):
     nodes = _nodes(path)
-    assert {node['package'] for node in nodes} == {'cap_sim_bridge', 'cap_perception', 'cap_control', 'cap_lmp_ros'}
+    assert {node['package'] for node in nodes} == {'cap_sim_bridge', 'cap_perception', 'cap_control', 'cap_lmp_ros',
+                                                  'cap_bringup'}
     for node in nodes:
         assert node['executable'] in _console_scripts(node['package']), node
     for package, filename in _configs(path):
