@@ -3,10 +3,13 @@ import json
 import os
 import queue
 import signal
+import socket
 import subprocess
 import sys
 import threading
 import time
+import urllib.error
+import urllib.request
 
 import pytest
 
@@ -19,12 +22,33 @@ def _cap(*args, timeout=120):
                           timeout=timeout, env=os.environ.copy())
 
 
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        return probe.getsockname()[1]
+
+
+def _page(url: str, timeout: float = 60.0) -> str:
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with urllib.request.urlopen(url, timeout=5) as response:
+                return response.read().decode()
+        except (urllib.error.URLError, ConnectionError):
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
+
+
 @pytest.mark.slow
 def test_up_send_snapshot_stop_and_ctrl_c(ros_isolation, tmp_path):
+    port = _free_port()
     graph = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'up', '--backend', 'cassette', '--seed', '2',
-                              '--objects', 'red block, blue block, green bowl'],
+                              '--objects', 'red block, blue block, green bowl', '--console', '--console-port',
+                              str(port)],
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=os.environ.copy())
     try:
+        assert '<title>cap-ros console</title>' in _page(f'http://127.0.0.1:{port}/')  # cap up --console
         ok = _cap('send', 'stack all the blocks', '--wait', '60')
         assert ok.returncode == 0, ok.stdout + ok.stderr
         assert 'put_first_on_second' in ok.stdout and ok.stdout.rstrip().endswith('success: done')
@@ -42,7 +66,9 @@ def test_up_send_snapshot_stop_and_ctrl_c(ros_isolation, tmp_path):
         graph.send_signal(signal.SIGINT)
         output, _ = graph.communicate(timeout=30)
     assert graph.returncode == 0
-    assert 'shutting down' in output
+    assert 'shutting down' in output and f'console: http://127.0.0.1:{port}/' in output
+    with pytest.raises(urllib.error.URLError):  # the console ended with the graph
+        _page(f'http://127.0.0.1:{port}/', timeout=0)
 
 
 def test_send_without_a_graph_says_so(ros_isolation):
