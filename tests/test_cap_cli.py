@@ -45,13 +45,27 @@ def test_up_send_snapshot_stop_and_ctrl_c(ros_isolation, tmp_path):
     port = _free_port()
     graph = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'up', '--backend', 'cassette', '--seed', '2',
                               '--objects', 'red block, blue block, green bowl', '--console', '--console-port',
-                              str(port)],
+                              str(port), '--require-approval'],
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=os.environ.copy())
     try:
         assert '<title>cap-ros console</title>' in _page(f'http://127.0.0.1:{port}/')  # cap up --console
-        ok = _cap('send', 'stack all the blocks', '--wait', '60')
-        assert ok.returncode == 0, ok.stdout + ok.stderr
-        assert 'put_first_on_second' in ok.stdout and ok.stdout.rstrip().endswith('success: done')
+        # --require-approval: the command waits with its plan until `cap approve`.
+        sending = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'send', 'stack all the blocks', '--wait',
+                                    '60'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                   env=os.environ.copy())
+        lines: queue.Queue = queue.Queue()
+        threading.Thread(target=_lines, args=(sending.stdout, lines), daemon=True).start()
+        seen: list[str] = []
+        assert _wait_for_line(lines, seen, '[awaiting_approval]', 120), ''.join(seen)
+        assert 'put the red block on the blue block' in seen[-1]
+        approved = _cap('approve')
+        assert approved.returncode == 0, approved.stdout + approved.stderr
+        assert 'plan: put the red block on the blue block' in approved.stdout
+        assert 'approved: it runs now' in approved.stdout
+        assert sending.wait(120) == 0
+        assert _wait_for_line(lines, seen, 'success: done', 10), ''.join(seen)
+        nothing = _cap('approve', '--reject')
+        assert nothing.returncode == 1 and 'no command waits for approval' in nothing.stdout
 
         missing = _cap('send', 'fly to the moon')
         assert missing.returncode == 1

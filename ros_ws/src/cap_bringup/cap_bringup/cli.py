@@ -6,6 +6,7 @@
     cap console --port 8765                          the web console of a graph that is up (cap_bringup/console)
     cap send "put the red block in the blue bowl"   run a command, follow it to the end (exit 0: it ran to the end)
     cap stop                                         stop the running program and every motion
+    cap approve [--reject]                           approve (or reject) the program waiting for approval
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
     cap demo                                         the table-top demo (see cap_bringup/demo.py)
     cap bench tabletop --trials 1                    the paper's table-top benchmark (see cap_bench/runner.py)
@@ -270,6 +271,59 @@ def send(command: str, server_timeout: float, timeout: float, out=None, namespac
         session.close()
 
 
+def approve(approved: bool, reason: str, command_id: str, server_timeout: float, namespace: str = '') -> int:
+    """Approve or reject the command waiting for approval (lmp_node's require_approval): the one `command_id` names,
+    else the one /cap/status says waits. Exit 0 when lmp_node took the answer, 1 when no such command waits."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from cap_interfaces.msg import GraphNames, StatusEvent
+    from cap_interfaces.srv import ApproveCommand
+
+    session = _Session('cap_approve', namespace)
+    waiting: dict[str, StatusEvent] = {}
+
+    def on_status(status: StatusEvent) -> None:
+        if status.stage == StatusEvent.STAGE_AWAITING_APPROVAL:
+            waiting[status.command_id] = status
+        elif status.stage in (StatusEvent.STAGE_DONE, StatusEvent.STAGE_ERROR, StatusEvent.STAGE_CANCELLED,
+                              StatusEvent.STAGE_REFUSED):
+            waiting.pop(status.command_id, None)
+
+    try:
+        client = session.node.create_client(ApproveCommand, GraphNames.APPROVE_SERVICE)
+        history = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        heard: list[bool] = []
+        session.node.create_subscription(StatusEvent, GraphNames.STATUS_TOPIC,
+                                         lambda status: (heard.append(True), on_status(status)), history)
+        if not session.spin_until(lambda: client.service_is_ready() and heard, server_timeout):
+            _error(f'error: nobody offers {session.node.resolve_topic_name(GraphNames.APPROVE_SERVICE)} with its '
+                   'status history; is the graph up (cap up)?')
+            return EXIT_UNREACHABLE
+        session.spin_until(lambda: False, SAY_DRAIN_S)  # the rest of the history
+        if not command_id:
+            if not waiting:
+                _say('no command waits for approval')
+                return EXIT_FAILED
+            command_id = list(waiting)[-1]
+        status = waiting.get(command_id)
+        if status is not None:
+            _say(f'{command_id}: {status.command}\n' + '\n'.join('    ' + line for line in status.code.splitlines()))
+            _say('plan: ' + ('; '.join(step.description for step in status.plan) or 'no robot action'))
+        future = client.call_async(ApproveCommand.Request(command_id=command_id, approve=approved, reason=reason))
+        if not session.spin_until(future.done, server_timeout):
+            _error(f'error: lmp_node did not answer within {server_timeout:g} s (--wait)')
+            return EXIT_UNREACHABLE
+        response = future.result()
+        _say(response.message)
+        return EXIT_OK if response.success else EXIT_FAILED
+    except Interrupted as interrupted:
+        _error(f'interrupted ({interrupted})')
+        return interrupted.exit_code
+    finally:
+        session.close()
+
+
 def stop(server_timeout: float, namespace: str = '') -> int:
     """Publish on /cap/stop once somebody listens."""
     from std_msgs.msg import Empty
@@ -412,7 +466,7 @@ def _end_console(process: Any) -> None:
 
 def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, cassette: str,
        record: bool, namespace: str = '', domain: str = 'tabletop', cpu: int = 0, model_file: str = '',
-       model_threads: int = 1, console_port: int | None = None) -> int:
+       model_threads: int = 1, console_port: int | None = None, require_approval: bool = False) -> int:
     """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM (and,
     with `console_port`, the web console in a process of its own beside it).
 
@@ -435,9 +489,9 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
     console_process = None
     allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else []  # before the pin
     backend = choose_backend(backend, model_file, cassette)
-    lmp: dict[str, Any] = {}
+    lmp: dict[str, Any] = {'require_approval': True} if require_approval else {}
     if backend == 'local':
-        lmp = {'model_file': model_file, 'model_threads': model_threads}
+        lmp.update(model_file=model_file, model_threads=model_threads)
         _say('language model: the local model server (loading; /cap/status says "model ready" when it is)')
     elif backend == 'cassette':
         _say('language model: the replay cassette (its recorded commands only; `make model` installs a local model)')
@@ -534,6 +588,8 @@ def build_parser() -> argparse.ArgumentParser:
                       'a second graph beside it another')
     p_up.add_argument('--domain', default='tabletop', help='the domain whose prompts, robot API and scene run '
                       '[tabletop]')
+    p_up.add_argument('--require-approval', action='store_true', help='hold each generated program until it is '
+                      'approved (cap approve, or the console), after a plan-only run lists its robot actions')
     p_up.add_argument('--console', action='store_true', help='also serve the web console (cap console) on '
                       '127.0.0.1, in a process of its own')
     p_up.add_argument('--console-port', type=int, default=8765, help='port of the web console [8765]')
@@ -552,6 +608,13 @@ def build_parser() -> argparse.ArgumentParser:
     p_send.add_argument('text', help='the command, e.g. "put the red block in the blue bowl"')
     p_send.add_argument('--timeout', type=float, default=600.0, help='give up after this many seconds [600]')
     p_send.add_argument('--wait', type=float, default=10.0, help='wait this long for lmp_node [10 s]')
+    p_approve = commands.add_parser('approve', help='approve (or reject) the program waiting for approval '
+                                    '(cap up --require-approval)')
+    p_approve.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
+    p_approve.add_argument('--reject', action='store_true', help='reject it: it does not run')
+    p_approve.add_argument('--reason', default='', help='words for the record (shown with a rejection)')
+    p_approve.add_argument('--id', default='', help='the command id (cmd-N) [the one waiting]')
+    p_approve.add_argument('--wait', type=float, default=10.0, help='wait this long for lmp_node [10 s]')
     p_stop = commands.add_parser('stop', help='stop the running program and every motion')
     p_stop.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_stop.add_argument('--wait', type=float, default=5.0, help='wait this long for a listener [5 s]')
@@ -583,13 +646,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == 'up':
         return up(args.seed, args.objects, not args.fast, args.perception, args.backend, args.cassette, args.record,
                   args.namespace, args.domain, args.cpu, args.model_file, args.model_threads,
-                  args.console_port if args.console else None)
+                  args.console_port if args.console else None, args.require_approval)
     if args.command == 'console':
         return console(args.port, args.namespace)
     if args.command == 'send':
         return send(args.text, args.wait, args.timeout, namespace=args.namespace)
     if args.command == 'stop':
         return stop(args.wait, args.namespace)
+    if args.command == 'approve':
+        return approve(not args.reject, args.reason, args.id, args.wait, args.namespace)
     return snapshot(args.camera or list(CAMERA_NAMES), args.out, args.wait, args.namespace)
 
 
