@@ -85,6 +85,12 @@ def test_up_send_snapshot_stop_and_ctrl_c(ros_isolation, tmp_path):
         _page(f'http://127.0.0.1:{port}/', timeout=0)
 
 
+def test_urdf_prints_the_robot_description():
+    result = _cap('urdf')
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith('<?xml') and '<joint name="shoulder_pan_joint" type="revolute">' in result.stdout
+
+
 def test_send_without_a_graph_says_so(ros_isolation):
     result = _cap('send', 'hello', '--wait', '1')
     assert result.returncode == 2

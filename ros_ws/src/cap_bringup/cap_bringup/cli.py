@@ -8,6 +8,7 @@
     cap stop                                         stop the running program and every motion
     cap approve [--reject]                           approve (or reject) the program waiting for approval
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
+    cap urdf > ur5e_gripper.urdf                     the robot's URDF, as /robot_description carries it
     cap demo                                         the table-top demo (see cap_bringup/demo.py)
     cap bench tabletop --trials 1                    the paper's table-top benchmark (see cap_bench/runner.py)
 
@@ -618,6 +619,9 @@ def build_parser() -> argparse.ArgumentParser:
     p_stop = commands.add_parser('stop', help='stop the running program and every motion')
     p_stop.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_stop.add_argument('--wait', type=float, default=5.0, help='wait this long for a listener [5 s]')
+    p_urdf = commands.add_parser('urdf', help='print the robot\'s URDF (what /robot_description carries), e.g. for '
+                                 'robot_state_publisher')
+    p_urdf.add_argument('--scene', default='tabletop', help='the simulator scene whose robot it is [tabletop]')
     p_snap = commands.add_parser('snapshot', help='save camera images as PNG')
     p_snap.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_snap.add_argument('--camera', action='append', help='camera name (repeatable; default: front and top)')
@@ -655,6 +659,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return stop(args.wait, args.namespace)
     if args.command == 'approve':
         return approve(not args.reject, args.reason, args.id, args.wait, args.namespace)
+    if args.command == 'urdf':
+        from cap_sim_bridge.scenes import build_model
+        from cap_sim_bridge.urdf import robot_urdf
+        print(robot_urdf(build_model([], args.scene)), end='')
+        return EXIT_OK
     return snapshot(args.camera or list(CAMERA_NAMES), args.out, args.wait, args.namespace)
 
 

@@ -28,7 +28,7 @@ _HINGE, _SLIDE = int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLI
 
 
 def _numbers(values: Sequence[float]) -> str:
-    return ' '.join(f'{float(value):.6g}' for value in values)
+    return ' '.join(f'{float(value) + 0.0:.6g}' for value in values)  # + 0.0: no "-0"
 
 
 def rpy_of_quaternion(quaternion: Sequence[float]) -> tuple[float, float, float]:
