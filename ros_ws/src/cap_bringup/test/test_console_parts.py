@@ -8,6 +8,7 @@ import asyncio
 import http.client
 import json
 import threading
+import time
 
 import cv2
 import numpy as np
@@ -181,6 +182,16 @@ def test_a_camera_stream_sends_jpeg_frames_while_watched_and_lets_go_after(serve
     assert headers['Content-Type'] == 'image/jpeg' and headers['X-Stamp'] == '1.500000'
     jpeg = response.read(int(headers['Content-Length']))
     assert cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR).shape == (48, 64, 3)
+    backend.channel.put(RawImage('yuv422', 4, 4, 8, bytes(32)))  # one it cannot show: the page is told, once
+    assert _wait(lambda: [n['text'] for n in backend.state.snapshot()['notices']] == [
+        f"{MemoryBackend.TOPIC}: cannot show images encoded 'yuv422'"])
     connection.close()
     backend.channel.put(_rgb())  # the next write finds the browser gone
     assert backend.unwatched.wait(10.0) and backend.channel.viewers == 0
+
+
+def _wait(predicate, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not predicate():
+        time.sleep(0.01)
+    return predicate()

@@ -206,16 +206,22 @@ class ConsoleServer:
         try:
             await response.prepare(request)
             await response.write(f'--{_BOUNDARY}\r\n'.encode())
-            sent_number, sent_at = 0, -1.0
+            seen, sent_number, sent_at, told = 0, 0, -1.0, False
             while True:
                 arrived.clear()
-                if channel.number == sent_number:
+                if channel.number == seen:
                     await arrived.wait()
                 pause = sent_at + 1.0 / self.max_fps - loop.time()
                 if pause > 0:  # at most max_fps: what arrives meanwhile replaces the frame
                     await asyncio.sleep(pause)
+                seen = channel.number
                 frame = await loop.run_in_executor(self._pool, channel.frame)
-                if frame is None or frame.number == sent_number:
+                if frame is None:
+                    if channel.error and not told:  # an image it cannot show: said once, then the next image
+                        self.backend.state.notice('error', channel.error)
+                        told = True
+                    continue
+                if frame.number == sent_number:
                     continue
                 sent_number, sent_at = frame.number, loop.time()
                 # Each part ends with the next boundary at once, so the browser shows it without waiting for more.
