@@ -78,6 +78,17 @@ def test_the_state_follows_a_command_from_receipt_to_outcome():
     assert [c['id'] for c in state.snapshot()['commands']] == ['cmd-3', 'cmd-4']  # the history is bounded
 
 
+def test_a_restarted_lmp_node_ends_what_was_open_and_its_reused_ids_are_new_commands():
+    state = ConsoleState()
+    state.on_status(StatusRecord('cmd-1', 'wave', 'done'))
+    state.on_status(StatusRecord('cmd-2', 'stack the blocks', 'executing'))
+    state.on_status(StatusRecord('', '', 'model', message='ready: domain tabletop'))
+    state.on_status(StatusRecord('cmd-1', 'say hi', 'received'))
+    commands = state.snapshot()['commands']
+    assert [(c['id'], c['command'], c['outcome']) for c in commands] == [
+        ('cmd-1', 'wave', 'done'), ('cmd-2', 'stack the blocks', 'lost'), ('cmd-1', 'say hi', '')]
+
+
 class MemoryBackend:
     """The ConsoleBackend of these tests: one image topic, requests recorded."""
 

@@ -42,7 +42,7 @@ class CommandEntry:
     message: str = ''
     plan: list[dict[str, Any]] = field(default_factory=list)
     said: list[str] = field(default_factory=list)
-    outcome: str = ''  # the final stage once it ended
+    outcome: str = ''  # the final stage once it ended; 'lost' when lmp_node started again before that
     started_s: float = 0.0
     ended_s: float = 0.0
 
@@ -58,7 +58,8 @@ class ConsoleState:
     def __init__(self, history_size: int = 50) -> None:
         self.history_size = history_size
         self._lock = threading.Lock()
-        self._commands: collections.OrderedDict[str, CommandEntry] = collections.OrderedDict()
+        self._commands: collections.deque[CommandEntry] = collections.deque()  # oldest first
+        self._by_id: dict[str, CommandEntry] = {}  # the newest entry of each command id
         self._notices: collections.deque[dict[str, Any]] = collections.deque(maxlen=MAX_NOTICES)
         self._notice_ids = itertools.count(1)
         self._streams: list[str] = []
@@ -73,16 +74,23 @@ class ConsoleState:
     def on_status(self, record: StatusRecord) -> None:
         with self._lock:
             if not record.command_id:  # lmp_node's own state ('ready: ...', 'model ready: ...')
+                if record.message.startswith('ready:'):  # lmp_node (re)started: what it ran before is over
+                    for entry in self._commands:
+                        if not entry.outcome:
+                            entry.outcome, entry.message = 'lost', 'lmp_node started again before it ended'
                 self._graph_state = record.message[:MAX_TEXT]
                 self._touch()
                 return
-            entry = self._commands.get(record.command_id)
-            if entry is None:
+            entry = self._by_id.get(record.command_id)
+            if entry is None or (entry.outcome and record.stage == 'received'):  # a restarted lmp_node reuses ids
                 entry = CommandEntry(record.command_id, record.command[:MAX_TEXT], record.stage,
                                      started_s=record.stamp_s)
-                self._commands[record.command_id] = entry
+                self._commands.append(entry)
+                self._by_id[record.command_id] = entry
                 while len(self._commands) > self.history_size:
-                    self._commands.popitem(last=False)
+                    dropped = self._commands.popleft()
+                    if self._by_id.get(dropped.command_id) is dropped:
+                        del self._by_id[dropped.command_id]
             entry.stage = record.stage
             if record.code:
                 entry.code = record.code[:MAX_CODE]
@@ -114,7 +122,7 @@ class ConsoleState:
             self._touch()
 
     def _running(self) -> CommandEntry | None:
-        running = [entry for entry in self._commands.values() if not entry.outcome and entry.stage != 'received']
+        running = [entry for entry in self._commands if not entry.outcome and entry.stage != 'received']
         return running[-1] if running else None
 
     def set_streams(self, topics: list[str]) -> None:
@@ -142,12 +150,12 @@ class ConsoleState:
         with self._lock:
             return {'version': self.version, 'namespace': self._namespace, 'graph': self._graph_state,
                     'streams': list(self._streams), 'notices': list(self._notices),
-                    'commands': [entry.view() for entry in self._commands.values()]}
+                    'commands': [entry.view() for entry in self._commands]}
 
     def awaiting_approval(self) -> list[str]:
         """The ids of the commands whose code waits for approval."""
         with self._lock:
-            return [entry.command_id for entry in self._commands.values()
+            return [entry.command_id for entry in self._commands
                     if entry.stage == 'awaiting_approval' and not entry.outcome]
 
 

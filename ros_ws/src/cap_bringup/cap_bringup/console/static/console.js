@@ -60,7 +60,12 @@ function renderPlan(list, plan) {
 }
 
 function renderCurrent(commands) {
-  const running = [...commands].reverse().find((c) => !c.outcome);
+  // One command runs at a time; those received after it wait in lmp_node's queue.
+  const open = commands.filter((c) => !c.outcome);
+  const running = open.find((c) => c.stage !== 'received') || open[0];
+  const queued = open.filter((c) => c !== running);
+  $('queued').hidden = queued.length === 0;
+  $('queued').textContent = 'Waiting: ' + queued.map((c) => c.command).join(' · ');
   $('current').hidden = !running;
   if (!running) return;
   $('current').dataset.commandId = running.id;
