@@ -275,10 +275,9 @@ def send(command: str, server_timeout: float, timeout: float, out=None, namespac
 def approve(approved: bool, reason: str, command_id: str, server_timeout: float, namespace: str = '') -> int:
     """Approve or reject the command waiting for approval (lmp_node's require_approval): the one `command_id` names,
     else the one /cap/status says waits. Exit 0 when lmp_node took the answer, 1 when no such command waits."""
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
     from cap_interfaces.msg import GraphNames, StatusEvent
     from cap_interfaces.srv import ApproveCommand
+    from cap_lmp_ros.lmp_node import EVENT_QOS
 
     session = _Session('cap_approve', namespace)
     waiting: dict[str, StatusEvent] = {}
@@ -292,11 +291,9 @@ def approve(approved: bool, reason: str, command_id: str, server_timeout: float,
 
     try:
         client = session.node.create_client(ApproveCommand, GraphNames.APPROVE_SERVICE)
-        history = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        heard: list[bool] = []
+        heard: list[bool] = []  # the status history (lmp_node's recent events) arrived
         session.node.create_subscription(StatusEvent, GraphNames.STATUS_TOPIC,
-                                         lambda status: (heard.append(True), on_status(status)), history)
+                                         lambda status: (heard.append(True), on_status(status)), EVENT_QOS)
         if not session.spin_until(lambda: client.service_is_ready() and heard, server_timeout):
             _error(f'error: nobody offers {session.node.resolve_topic_name(GraphNames.APPROVE_SERVICE)} with its '
                    'status history; is the graph up (cap up)?')
