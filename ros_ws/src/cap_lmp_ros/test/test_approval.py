@@ -162,3 +162,20 @@ def test_plain_values_and_the_wire_form_of_a_planned_call():
     for bad in ({'function': 'os.system'}, {'function': 'f', 'args': 'x'}, ['f'], {'function': 3}):
         with pytest.raises(ValueError):
             planned_call(bad)
+
+
+def test_the_table_top_says_what_each_planned_call_does():
+    from cap_lmp_ros.domains.tabletop.plan import describe_call
+    from cap_lmp_ros.plan_steps import plan_summary
+
+    named = describe_call(PlannedCall('put_first_on_second', (['the Red block'], 'blue bowl')))
+    assert (named.object_name, named.target_name, named.description) == (
+        'red block', 'blue bowl', 'put the red block on the blue bowl')
+    point = describe_call(PlannedCall('put_first_on_second', ('red block',), {'target': [0.1, -0.5]}))
+    assert point.points == ((0.1, -0.5, 0.0),) and point.description == 'put the red block at (0.100, -0.500)'
+    odd = describe_call(PlannedCall('put_first_on_second', ('red block', '<object>')))
+    assert odd.target_name == '<object>'  # text the program passed is kept as text (the page shows it as text)
+    assert describe_call(PlannedCall('wave', (3,))).description == 'wave(3)'
+    assert plan_summary([named, point]) == ('1. put the red block on the blue bowl; '
+                                            '2. put the red block at (0.100, -0.500)')
+    assert plan_summary([]) == 'the plan-only run found no robot action'
