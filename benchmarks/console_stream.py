@@ -6,7 +6,9 @@ it, so it is the sensitive measure (in real time the factor is 1.0 as long as th
 console` runs in a process of its own on the other CPUs, as `cap up --console` starts it, and so does the viewer.
 
 Windows of `--seconds` alternate (none, browser, none, browser, ...) so that load from elsewhere on the machine
-falls on both alike:
+falls on both alike, and besides the real-time factor each window reports the graph process' CPU time per simulated
+second, which other processes taking the CPU from it do not change (the real-time factor of a graph that has its CPU
+to itself is its inverse):
 - none: nobody watches (the console runs, subscribed to no image);
 - browser: Debian's headless Chromium shows the console page, which streams every colour camera (front and top).
 Then the stream itself: a client reads the front camera's MJPEG stream for `--seconds` and counts frames; latency
@@ -82,10 +84,26 @@ def helper(mode: str, url: str, seconds: float, cpus: set[int] | None) -> subpro
                             text=True, preexec_fn=(lambda: os.sched_setaffinity(0, cpus)) if cpus else None)
 
 
-def real_time_factor(world, seconds: float) -> float:
-    sim, wall = world.time, time.monotonic()
+def window(world, seconds: float) -> tuple[float, float]:
+    """(real-time factor, CPU seconds of this process per simulated second) over `seconds` of wall time."""
+    sim, wall, cpu = world.time, time.monotonic(), time.process_time()
     time.sleep(seconds)
-    return (world.time - sim) / (time.monotonic() - wall)
+    simulated = world.time - sim
+    return simulated / (time.monotonic() - wall), (time.process_time() - cpu) / simulated
+
+
+def summary(alone: list[tuple[float, float]], watched: list[tuple[float, float]]) -> dict:
+    def mean(values: list[tuple[float, float]], index: int) -> float:
+        return statistics.mean(value[index] for value in values)
+
+    rtf_alone, rtf_watched, cpu_alone, cpu_watched = mean(alone, 0), mean(watched, 0), mean(alone, 1), mean(watched, 1)
+    return {'nobody_watching': [round(v, 2) for v, _ in alone],
+            'one_browser_watching': [round(v, 2) for v, _ in watched],
+            'mean_nobody_watching': round(rtf_alone, 2), 'mean_one_browser_watching': round(rtf_watched, 2),
+            'change_percent': round(100 * (rtf_watched - rtf_alone) / rtf_alone, 1),
+            'cpu_s_per_simulated_s': {'nobody_watching': round(cpu_alone, 3),
+                                      'one_browser_watching': round(cpu_watched, 3),
+                                      'change_percent': round(100 * (cpu_watched - cpu_alone) / cpu_alone, 1)}}
 
 
 def main() -> None:
@@ -93,7 +111,7 @@ def main() -> None:
     parser.add_argument('--viewer', help=argparse.SUPPRESS)
     parser.add_argument('--client', help=argparse.SUPPRESS)
     parser.add_argument('--seconds', type=float, default=20.0, help='length of each window [20 s]')
-    parser.add_argument('--rounds', type=int, default=3, help='pairs of windows without and with a browser [3]')
+    parser.add_argument('--rounds', type=int, default=4, help='pairs of windows without and with a browser [4]')
     args = parser.parse_args()
     if args.viewer:
         return view(args.viewer, args.seconds)
@@ -119,25 +137,22 @@ def main() -> None:
     rclpy.init(context=context)
     graph = Graph(context, GraphOptions(seed=1))
     result: dict = {'graph': 'cap up --fast (as fast as possible), pinned to one CPU', 'console': url,
-                    'console_cpus': sorted(cpus) if cpus else 'shared', 'seconds_per_window': args.seconds}
+                    'console_cpus': sorted(cpus) if cpus else 'shared', 'seconds_per_window': args.seconds,
+                    'load_average_before': os.getloadavg()[0]}
     try:
         world = graph.world
         time.sleep(5.0)  # settle: discovery, first frames
         alone, watched = [], []
         for _ in range(args.rounds):
-            alone.append(real_time_factor(world, args.seconds))
+            alone.append(window(world, args.seconds))
             viewer = helper('--viewer', url, args.seconds + 60, cpus)
             assert viewer.stdout.readline().strip() == 'watching'
             time.sleep(2.0)  # the page's streams are up
-            watched.append(real_time_factor(world, args.seconds))
+            watched.append(window(world, args.seconds))
             viewer.terminate()
             viewer.wait(30)
             time.sleep(2.0)  # its streams are closed and unsubscribed
-        mean_alone, mean_watched = statistics.mean(alone), statistics.mean(watched)
-        result['real_time_factor'] = {
-            'nobody_watching': [round(v, 2) for v in alone], 'one_browser_watching': [round(v, 2) for v in watched],
-            'mean_nobody_watching': round(mean_alone, 2), 'mean_one_browser_watching': round(mean_watched, 2),
-            'change_percent': round(100 * (mean_watched - mean_alone) / mean_alone, 1)}
+        result['real_time_factor'] = summary(alone, watched)
 
         arrived: dict[float, float] = {}
         probe = rclpy.create_node('stream_probe', context=context)
@@ -158,6 +173,7 @@ def main() -> None:
             'frames_matched': len(latencies)}
         graph.events_executor.remove_node(probe)
         probe.destroy_node()
+        result['load_average_after'] = os.getloadavg()[0]
     finally:
         console.terminate()
         console.wait(20)
