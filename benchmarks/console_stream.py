@@ -74,11 +74,6 @@ def read_stream(url: str, seconds: float) -> None:
 
 
 # ------------------------------------------------------------------------------------------------ the benchmark
-def other_cpus() -> set[int] | None:
-    allowed = sorted(os.sched_getaffinity(0))
-    return set(allowed[1:]) if len(allowed) > 1 else None
-
-
 def helper(mode: str, url: str, seconds: float, cpus: set[int] | None) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, __file__, mode, url, '--seconds', str(seconds)], stdout=subprocess.PIPE,
                             text=True, preexec_fn=(lambda: os.sched_setaffinity(0, cpus)) if cpus else None)
@@ -122,11 +117,12 @@ def main() -> None:
     from rclpy.context import Context
     from sensor_msgs.msg import Image
 
-    from cap_bringup.graph import Graph, GraphOptions
     from cap_bringup.console.node import STREAM_QOS
+    from cap_bringup.cpu_affinity import cpus_besides
+    from cap_bringup.graph import Graph, GraphOptions
     from cap_ros_common.time import to_seconds
 
-    cpus = other_cpus()
+    cpus = set(cpus_besides(0, list(os.sched_getaffinity(0)))) or None  # the graph takes the first CPU
     # Before the graph pins this process: the console gets the other CPUs, as with `cap up --console`.
     console = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'console', '--port', '0'],
                                stdout=subprocess.PIPE, text=True,

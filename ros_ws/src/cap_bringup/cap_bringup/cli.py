@@ -438,11 +438,13 @@ def _start_console(port: int, namespace: str, graph_cpu: int, allowed: list[int]
     interpreter lock or its CPU."""
     import subprocess
 
+    from cap_bringup.cpu_affinity import cpus_besides
+
     command = [sys.executable, '-m', 'cap_bringup.cli', 'console', '--port', str(port)]
     if namespace:
         command += ['--namespace', namespace]
     process = subprocess.Popen(command, stdin=subprocess.DEVNULL)
-    others = [cpu for cpu in allowed if cpu != allowed[graph_cpu % len(allowed)]] if len(allowed) > 1 else []
+    others = cpus_besides(graph_cpu, allowed)
     if others:
         try:
             os.sched_setaffinity(process.pid, others)
