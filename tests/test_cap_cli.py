@@ -56,7 +56,9 @@ def test_up_send_snapshot_stop_and_ctrl_c(ros_isolation, tmp_path):
         lines: queue.Queue = queue.Queue()
         threading.Thread(target=_lines, args=(sending.stdout, lines), daemon=True).start()
         seen: list[str] = []
-        assert _wait_for_line(lines, seen, '[awaiting_approval]', 120), ''.join(seen)
+        if not _wait_for_line(lines, seen, '[awaiting_approval]', 120):
+            sending.kill()
+            raise AssertionError(''.join(seen) + sending.communicate()[1])
         assert 'put the red block on the blue block' in seen[-1]
         approved = _cap('approve')
         assert approved.returncode == 0, approved.stdout + approved.stderr
