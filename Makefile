@@ -1,5 +1,5 @@
 # The three commands of cap-ros. Each one sets up what it needs first (fast when nothing changed).
-.PHONY: setup model test test-fast demo clean
+.PHONY: setup model browser test test-fast demo clean
 
 setup:
 	bash scripts/setup.sh
@@ -9,8 +9,13 @@ setup:
 model: setup
 	bash scripts/model.sh
 
-# Everything, the tests that drive the graph with the real local model included (so the model is installed first).
-test: setup model
+# The headless browser of the console's tests: Debian's Chromium (apt-get, as root), never a download of its own.
+browser:
+	bash scripts/browser.sh
+
+# Everything, the tests that drive the graph with the real local model and the console in a real browser included
+# (so the model and the browser are installed first).
+test: setup model browser
 	bash scripts/test.sh
 
 # Unit tests only: every package's own tests that bring up no graph and no simulator (a couple of minutes).

@@ -3,10 +3,13 @@ import json
 import os
 import queue
 import signal
+import socket
 import subprocess
 import sys
 import threading
 import time
+import urllib.error
+import urllib.request
 
 import pytest
 
@@ -19,15 +22,52 @@ def _cap(*args, timeout=120):
                           timeout=timeout, env=os.environ.copy())
 
 
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        return probe.getsockname()[1]
+
+
+def _page(url: str, timeout: float = 60.0) -> str:
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with urllib.request.urlopen(url, timeout=5) as response:
+                return response.read().decode()
+        except (urllib.error.URLError, ConnectionError):
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
+
+
 @pytest.mark.slow
 def test_up_send_snapshot_stop_and_ctrl_c(ros_isolation, tmp_path):
+    port = _free_port()
     graph = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'up', '--backend', 'cassette', '--seed', '2',
-                              '--objects', 'red block, blue block, green bowl'],
+                              '--objects', 'red block, blue block, green bowl', '--console', '--console-port',
+                              str(port), '--require-approval'],
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=os.environ.copy())
     try:
-        ok = _cap('send', 'stack all the blocks', '--wait', '60')
-        assert ok.returncode == 0, ok.stdout + ok.stderr
-        assert 'put_first_on_second' in ok.stdout and ok.stdout.rstrip().endswith('success: done')
+        assert '<title>cap-ros console</title>' in _page(f'http://127.0.0.1:{port}/')  # cap up --console
+        # --require-approval: the command waits with its plan until `cap approve`.
+        sending = subprocess.Popen([sys.executable, '-m', 'cap_bringup.cli', 'send', 'stack all the blocks', '--wait',
+                                    '60'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                   env=os.environ.copy())
+        lines: queue.Queue = queue.Queue()
+        threading.Thread(target=_lines, args=(sending.stdout, lines), daemon=True).start()
+        seen: list[str] = []
+        if not _wait_for_line(lines, seen, '[awaiting_approval]', 120):
+            sending.kill()
+            raise AssertionError(''.join(seen) + sending.communicate()[1])
+        assert 'put the red block on the blue block' in seen[-1]
+        approved = _cap('approve')
+        assert approved.returncode == 0, approved.stdout + approved.stderr
+        assert 'plan: put the red block on the blue block' in approved.stdout
+        assert 'approved: it runs now' in approved.stdout
+        assert sending.wait(120) == 0
+        assert _wait_for_line(lines, seen, 'success: done', 10), ''.join(seen)
+        nothing = _cap('approve', '--reject')
+        assert nothing.returncode == 1 and 'no command waits for approval' in nothing.stdout
 
         missing = _cap('send', 'fly to the moon')
         assert missing.returncode == 1
@@ -42,7 +82,15 @@ def test_up_send_snapshot_stop_and_ctrl_c(ros_isolation, tmp_path):
         graph.send_signal(signal.SIGINT)
         output, _ = graph.communicate(timeout=30)
     assert graph.returncode == 0
-    assert 'shutting down' in output
+    assert 'shutting down' in output and f'console: http://127.0.0.1:{port}/' in output
+    with pytest.raises(urllib.error.URLError):  # the console ended with the graph
+        _page(f'http://127.0.0.1:{port}/', timeout=0)
+
+
+def test_urdf_prints_the_robot_description():
+    result = _cap('urdf')
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith('<?xml') and '<joint name="shoulder_pan_joint" type="revolute">' in result.stdout
 
 
 def test_send_without_a_graph_says_so(ros_isolation):

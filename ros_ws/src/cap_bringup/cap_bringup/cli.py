@@ -2,9 +2,13 @@
 
     cap up --seed 3                                  bring up the whole simulated graph (Ctrl-C stops it)
     cap up --namespace robot1                        ... with every name under /robot1 (a second robot beside)
+    cap up --console                                 ... and the web console at http://127.0.0.1:8765/
+    cap console --port 8765                          the web console of a graph that is up (cap_bringup/console)
     cap send "put the red block in the blue bowl"   run a command, follow it to the end (exit 0: it ran to the end)
     cap stop                                         stop the running program and every motion
+    cap approve [--reject]                           approve (or reject) the program waiting for approval
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
+    cap urdf > ur5e_gripper.urdf                     the robot's URDF, as /robot_description carries it
     cap demo [whiteboard]                            the table-top demo (cap_bringup/demo.py), or the whiteboard one
     cap bench tabletop --trials 1                    the paper's table-top benchmark (see cap_bench/runner.py)
 
@@ -268,6 +272,56 @@ def send(command: str, server_timeout: float, timeout: float, out=None, namespac
         session.close()
 
 
+def approve(approved: bool, reason: str, command_id: str, server_timeout: float, namespace: str = '') -> int:
+    """Approve or reject the command waiting for approval (lmp_node's require_approval): the one `command_id` names,
+    else the one /cap/status says waits. Exit 0 when lmp_node took the answer, 1 when no such command waits."""
+    from cap_interfaces.msg import GraphNames, StatusEvent
+    from cap_interfaces.srv import ApproveCommand
+    from cap_lmp_ros.lmp_node import EVENT_QOS
+
+    session = _Session('cap_approve', namespace)
+    waiting: dict[str, StatusEvent] = {}
+
+    def on_status(status: StatusEvent) -> None:
+        if status.stage == StatusEvent.STAGE_AWAITING_APPROVAL:
+            waiting[status.command_id] = status
+        elif status.stage in (StatusEvent.STAGE_DONE, StatusEvent.STAGE_ERROR, StatusEvent.STAGE_CANCELLED,
+                              StatusEvent.STAGE_REFUSED):
+            waiting.pop(status.command_id, None)
+
+    try:
+        client = session.node.create_client(ApproveCommand, GraphNames.APPROVE_SERVICE)
+        heard: list[bool] = []  # the status history (lmp_node's recent events) arrived
+        session.node.create_subscription(StatusEvent, GraphNames.STATUS_TOPIC,
+                                         lambda status: (heard.append(True), on_status(status)), EVENT_QOS)
+        if not session.spin_until(lambda: client.service_is_ready() and heard, server_timeout):
+            _error(f'error: nobody offers {session.node.resolve_topic_name(GraphNames.APPROVE_SERVICE)} with its '
+                   'status history; is the graph up (cap up)?')
+            return EXIT_UNREACHABLE
+        session.spin_until(lambda: False, SAY_DRAIN_S)  # the rest of the history
+        if not command_id:
+            if not waiting:
+                _say('no command waits for approval')
+                return EXIT_FAILED
+            command_id = list(waiting)[-1]
+        status = waiting.get(command_id)
+        if status is not None:
+            _say(f'{command_id}: {status.command}\n' + '\n'.join('    ' + line for line in status.code.splitlines()))
+            _say('plan: ' + ('; '.join(step.description for step in status.plan) or 'no robot action'))
+        future = client.call_async(ApproveCommand.Request(command_id=command_id, approve=approved, reason=reason))
+        if not session.spin_until(future.done, server_timeout):
+            _error(f'error: lmp_node did not answer within {server_timeout:g} s (--wait)')
+            return EXIT_UNREACHABLE
+        response = future.result()
+        _say(response.message)
+        return EXIT_OK if response.success else EXIT_FAILED
+    except Interrupted as interrupted:
+        _error(f'interrupted ({interrupted})')
+        return interrupted.exit_code
+    finally:
+        session.close()
+
+
 def stop(server_timeout: float, namespace: str = '') -> int:
     """Publish on /cap/stop once somebody listens."""
     from std_msgs.msg import Empty
@@ -340,10 +394,81 @@ def choose_backend(backend: str, model_file: str = '', cassette: str = '') -> st
     return 'local' if local_model_installed(model_file) else 'cassette'
 
 
+def console(port: int, namespace: str = '') -> int:
+    """Serve the web console of the graph (in this namespace) on 127.0.0.1:`port` until Ctrl-C or SIGTERM.
+
+    Exits 0 when stopped, 2 when the port cannot be had (one line says so).
+    """
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.signals import SignalHandlerOptions
+
+    from cap_bringup.console.node import ConsoleNode
+
+    signals = _signals()
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        try:
+            node = ConsoleNode(context=context, namespace=normalise_namespace(namespace),
+                               parameter_overrides=[Parameter('port', value=port)])
+        except OSError as error:
+            _error(f'error: {one_line(str(error))}')
+            return EXIT_UNREACHABLE
+        executor.add_node(node)
+        _say(f'console: {node.url}  (Ctrl-C stops it)')
+        while not signals.event.is_set() and context.ok():
+            executor.spin_once(timeout_sec=0.2)
+        return EXIT_OK
+    finally:
+        executor.shutdown(timeout_sec=0)
+        if node is not None:
+            node.destroy_node()
+        context.try_shutdown()
+
+
+def _start_console(port: int, namespace: str, graph_cpu: int, allowed: list[int]) -> Any:
+    """`cap console` as a process of its own beside the graph, on the CPUs (of `allowed`, the process' CPUs before
+    the graph pinned it) the graph is not pinned to: its web server and JPEG encoding then never take the graph's
+    interpreter lock or its CPU."""
+    import subprocess
+
+    from cap_bringup.cpu_affinity import cpus_besides
+
+    command = [sys.executable, '-m', 'cap_bringup.cli', 'console', '--port', str(port)]
+    if namespace:
+        command += ['--namespace', namespace]
+    process = subprocess.Popen(command, stdin=subprocess.DEVNULL)
+    others = cpus_besides(graph_cpu, allowed)
+    if others:
+        try:
+            os.sched_setaffinity(process.pid, others)
+        except OSError:  # the process ended already (its error is on stderr) or the CPU is not ours
+            pass
+    return process
+
+
+def _end_console(process: Any) -> None:
+    if process is None or process.poll() is not None:
+        return
+    process.terminate()
+    try:
+        process.wait(5.0)
+    except Exception:  # it did not end: kill it
+        process.kill()
+        process.wait()
+
+
 def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, cassette: str,
        record: bool, namespace: str = '', domain: str = 'tabletop', cpu: int = 0, model_file: str = '',
-       model_threads: int = 1) -> int:
-    """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM.
+       model_threads: int = 1, console_port: int | None = None, require_approval: bool = False) -> int:
+    """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM (and,
+    with `console_port`, the web console in a process of its own beside it).
 
     Exits 0 when stopped by a signal, FATAL_EXIT_CODE (70) when a thread the graph depends on died (the graph no
     longer answered), 2 when the graph cannot be built as configured (one line says what to set).
@@ -361,10 +486,12 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     graph = None
+    console_process = None
+    allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else []  # before the pin
     backend = choose_backend(backend, model_file, cassette)
-    lmp: dict[str, Any] = {}
+    lmp: dict[str, Any] = {'require_approval': True} if require_approval else {}
     if backend == 'local':
-        lmp = {'model_file': model_file, 'model_threads': model_threads}
+        lmp.update(model_file=model_file, model_threads=model_threads)
         _say('language model: the local model server (loading; /cap/status says "model ready" when it is)')
     elif backend == 'cassette':
         _say('language model: the replay cassette (its recorded commands only; `make model` installs a local model)')
@@ -377,6 +504,8 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
         except (ValueError, CapLLMError) as error:  # a configuration the user can fix: say what, in one line
             _error(f'error: {one_line(str(error))}')
             return EXIT_UNREACHABLE
+        if console_port is not None and signals.received is None:
+            console_process = _start_console(console_port, namespace, cpu, allowed)
         if signals.received is None:
             where = f', namespace {graph.namespace}' if graph.namespace else ''
             flag = f' --namespace {graph.namespace.lstrip("/")}' if graph.namespace else ''
@@ -389,6 +518,7 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
         _say('shutting down')
         return EXIT_OK
     finally:
+        _end_console(console_process)
         if graph is not None:
             graph.close()
         context.try_shutdown()
@@ -458,6 +588,15 @@ def build_parser() -> argparse.ArgumentParser:
                       'a second graph beside it another')
     p_up.add_argument('--domain', default='tabletop', help='the domain whose prompts, robot API and scene run '
                       '[tabletop]')
+    p_up.add_argument('--require-approval', action='store_true', help='hold each generated program until it is '
+                      'approved (cap approve, or the console), after a plan-only run lists its robot actions')
+    p_up.add_argument('--console', action='store_true', help='also serve the web console (cap console) on '
+                      '127.0.0.1, in a process of its own')
+    p_up.add_argument('--console-port', type=int, default=8765, help='port of the web console [8765]')
+    p_console = commands.add_parser('console', help='serve the web console of a running graph on 127.0.0.1: '
+                                    'cameras, commands, code, approval, stop')
+    p_console.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
+    p_console.add_argument('--port', type=int, default=8765, help='port on 127.0.0.1; 0: a free one [8765]')
     commands.add_parser('demo', help='run the table-top demo, or `cap demo whiteboard` the whiteboard session '
                         '(options: cap demo [whiteboard] --help)', add_help=False)
     commands.add_parser('bench', help='the paper\'s benchmarks: tabletop, codegen, humaneval, reasoning (cap bench '
@@ -470,9 +609,19 @@ def build_parser() -> argparse.ArgumentParser:
     p_send.add_argument('text', help='the command, e.g. "put the red block in the blue bowl"')
     p_send.add_argument('--timeout', type=float, default=600.0, help='give up after this many seconds [600]')
     p_send.add_argument('--wait', type=float, default=10.0, help='wait this long for lmp_node [10 s]')
+    p_approve = commands.add_parser('approve', help='approve (or reject) the program waiting for approval '
+                                    '(cap up --require-approval)')
+    p_approve.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
+    p_approve.add_argument('--reject', action='store_true', help='reject it: it does not run')
+    p_approve.add_argument('--reason', default='', help='words for the record (shown with a rejection)')
+    p_approve.add_argument('--id', default='', help='the command id (cmd-N) [the one waiting]')
+    p_approve.add_argument('--wait', type=float, default=10.0, help='wait this long for lmp_node [10 s]')
     p_stop = commands.add_parser('stop', help='stop the running program and every motion')
     p_stop.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_stop.add_argument('--wait', type=float, default=5.0, help='wait this long for a listener [5 s]')
+    p_urdf = commands.add_parser('urdf', help='print the robot\'s URDF (what /robot_description carries), e.g. for '
+                                 'robot_state_publisher')
+    p_urdf.add_argument('--scene', default='tabletop', help='the simulator scene whose robot it is [tabletop]')
     p_snap = commands.add_parser('snapshot', help='save camera images as PNG')
     p_snap.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_snap.add_argument('--camera', action='append', help='camera name (repeatable; default: front and top)')
@@ -500,11 +649,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     _signals()  # from here on SIGINT / SIGTERM end the command cleanly (rclpy's imports take a while)
     if args.command == 'up':
         return up(args.seed, args.objects, not args.fast, args.perception, args.backend, args.cassette, args.record,
-                  args.namespace, args.domain, args.cpu, args.model_file, args.model_threads)
+                  args.namespace, args.domain, args.cpu, args.model_file, args.model_threads,
+                  args.console_port if args.console else None, args.require_approval)
+    if args.command == 'console':
+        return console(args.port, args.namespace)
     if args.command == 'send':
         return send(args.text, args.wait, args.timeout, namespace=args.namespace)
     if args.command == 'stop':
         return stop(args.wait, args.namespace)
+    if args.command == 'approve':
+        return approve(not args.reject, args.reason, args.id, args.wait, args.namespace)
+    if args.command == 'urdf':
+        from cap_sim_bridge.scenes import build_model
+        from cap_sim_bridge.urdf import robot_urdf
+        print(robot_urdf(build_model([], args.scene)), end='')
+        return EXIT_OK
     return snapshot(args.camera or list(CAMERA_NAMES), args.out, args.wait, args.namespace)
 
 

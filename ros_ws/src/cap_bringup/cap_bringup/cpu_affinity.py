@@ -35,3 +35,13 @@ def pin_to_one_cpu(index: int = 0) -> int | None:
         except OSError:  # a thread that ended meanwhile
             pass
     return cpu
+
+
+def cpus_besides(index: int, allowed: list[int]) -> list[int]:
+    """The CPUs of `allowed` other than the one `pin_to_one_cpu(index)` picks among them (for a process that should
+    keep off the graph's CPU, such as the web console); empty when there are fewer than two."""
+    allowed = sorted(allowed)
+    if len(allowed) < 2:
+        return []
+    pinned = allowed[index % len(allowed)]
+    return [cpu for cpu in allowed if cpu != pinned]

@@ -1,5 +1,6 @@
 """Bring up a domain's whole graph in one process: the sim bridge, the domain's perception and control nodes (for
-the table top: perception and pick-and-place) and lmp_node.
+the table top: perception and pick-and-place), lmp_node and the visualization node (RViz's /robot_description and
+/cap/markers).
 
 `cap up`, the demo, the integration tests and the benchmark all start the graph as a `Graph`, so they run the same
 nodes with the same parameters (each node's defaults from its config dataclass, then its package's config/*.yaml,
@@ -39,6 +40,7 @@ from cap_lmp_ros.domains.registry import get_domain
 from cap_lmp_ros.thread_watch import ThreadWatch
 
 
+
 def namespace_arguments(namespace: str) -> dict[str, Any]:
     """Node options that put a node under `namespace` ('' or '/robot1') with the clock of that namespace's simulator.
 
@@ -57,8 +59,12 @@ def is_quick(node_name: str, parameters: dict[str, Any]) -> bool:
     """Whether every callback of the node is quick, so that it may share the single-threaded events executor.
 
     The RGB-D detector analyses frames in perception's callbacks, which would hold its services up on that one
-    thread: with that source perception stays on the multi-threaded executor.
+    thread: with that source perception stays on the multi-threaded executor. The visualization node only sends
+    requests and handles answers, and its perception clients are woken by every perception answer of the process
+    (see Graph.__init__): it belongs there too.
     """
+    if node_name == 'visualization':
+        return True
     return node_name == 'perception_node' and parameters.get('source', 'ground_truth') != 'rgbd'
 
 
@@ -92,6 +98,7 @@ class GraphOptions:
             # A camera sees a fresh stack only once the tool has moved out of its line of sight.
             'pick_place': {'clear_view': self.perception == 'rgbd'},
             'lmp_node': lmp,
+            'visualization': {'scene': domain.scene},
         }
         values: dict[str, dict[str, Any]] = {}
         for spec in graph_nodes(domain):

@@ -1,9 +1,9 @@
 """The nodes of a domain's graph, as `cap up` and the launch file start them (no rclpy here).
 
-Every graph starts with the simulator and ends with lmp_node; the domain's perception and control nodes come
-between (`Domain.nodes`). Nodes are named by strings (cap_lmp_ros.domains.registry.NodeSpec), so that a domain is
-described without importing its nodes; the one-process graph loads the classes, a launch file starts the
-executables.
+Every graph starts with the simulator; the domain's perception and control nodes come next (`Domain.nodes`), then
+lmp_node and the visualization node (RViz's /robot_description and /cap/markers). Nodes are named by strings
+(cap_lmp_ros.domains.registry.NodeSpec), so that a domain is described without importing its nodes; the one-process
+graph loads the classes, a launch file starts the executables.
 """
 from __future__ import annotations
 
@@ -14,12 +14,14 @@ from cap_lmp_ros.domains.registry import Domain, NodeSpec
 SIM_BRIDGE_NODE = NodeSpec('sim_bridge', 'cap_sim_bridge', 'sim_bridge', 'cap_sim_bridge.bridge_node:SimBridgeNode',
                            'sim_bridge.yaml')
 LMP_NODE = NodeSpec('lmp_node', 'cap_lmp_ros', 'lmp_node', 'cap_lmp_ros.lmp_node:LmpNode', 'lmp_node.yaml')
+VISUALIZATION_NODE = NodeSpec('visualization', 'cap_bringup', 'visualization_node',
+                              'cap_bringup.visualization_node:VisualizationNode', 'visualization.yaml')
 
 
 def graph_nodes(domain: Domain) -> tuple[NodeSpec, ...]:
-    """The nodes of `domain`'s graph in start order: the simulator first, lmp_node last. Every node but the
-    simulator takes its time from the simulator's /clock (the simulator keeps the wall clock it paces by)."""
-    return (SIM_BRIDGE_NODE, *domain.nodes, LMP_NODE)
+    """The nodes of `domain`'s graph in start order: the simulator first, what serves commands last. Every node but
+    the simulator takes its time from the simulator's /clock (the simulator keeps the wall clock it paces by)."""
+    return (SIM_BRIDGE_NODE, *domain.nodes, LMP_NODE, VISUALIZATION_NODE)
 
 
 def node_class(spec: NodeSpec) -> type:
@@ -31,4 +33,4 @@ def node_class(spec: NodeSpec) -> type:
         raise ValueError(f'node {spec.name!r}: cannot load {spec.node_class!r} ({error})') from None
 
 
-__all__ = ['LMP_NODE', 'SIM_BRIDGE_NODE', 'graph_nodes', 'node_class']
+__all__ = ['LMP_NODE', 'SIM_BRIDGE_NODE', 'VISUALIZATION_NODE', 'graph_nodes', 'node_class']

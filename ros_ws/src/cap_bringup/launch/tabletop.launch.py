@@ -1,9 +1,12 @@
-"""A domain's graph as one process per node, for a regular ROS 2 Jazzy install (`ros2 launch` of this file); the
-table top by default (four processes: simulator, perception, pick-and-place, lmp_node).
+"""A domain's graph as one process per node, for a regular ROS 2 Jazzy install (`ros2 launch` of this file): the
+simulator, the domain's perception and control nodes (the table top's by default: perception and pick-and-place),
+lmp_node and the visualization node (/robot_description and /cap/markers for RViz), and with console:=true the web
+console.
 
     ros2 launch cap_bringup tabletop.launch.py                       # simulator in real time, reference cassette
     ros2 launch cap_bringup tabletop.launch.py namespace:=robot1     # every name under /robot1
     ros2 launch cap_bringup tabletop.launch.py perception:=rgbd llm_backend:=http   # CAP_LLM_* from the environment
+    ros2 launch cap_bringup tabletop.launch.py console:=true require_approval:=true   # approve each program first
 
 Each node takes its defaults from its config dataclass, then its package's config/*.yaml (keyed `/**/<node>`, so
 they apply under any namespace), then the arguments below that are given. The nodes take their time from the
@@ -31,6 +34,8 @@ ARGUMENTS = (
     ('llm_backend', 'cassette (offline), http (CAP_LLM_BASE_URL, CAP_LLM_MODEL from the environment) or local (the '
                     'llama.cpp server and model of `make model`, started by lmp_node)'),
     ('domain', 'the domain whose prompts, robot API and scene run (cap_lmp_ros.domains)'),
+    ('require_approval', 'true: each generated program waits for approval on /cap/approve (lmp_node)'),
+    ('console', 'true: also the web console on 127.0.0.1 (port 8765)'),
 )
 
 
@@ -43,7 +48,9 @@ def _nodes(context):
     namespace = normalise_namespace(value['namespace'])
     common = {'namespace': namespace, 'remappings': [('/clock', f'{namespace}/clock')], 'output': 'screen'}
     domain = get_domain(value['domain'] or 'tabletop')
-    chosen: dict[str, dict] = {name: {} for name in ('sim_bridge', 'perception_node', 'pick_place', 'lmp_node')}
+    chosen: dict[str, dict] = {spec.name: {} for spec in graph_nodes(domain)}
+    chosen.setdefault('perception_node', {})
+    chosen.setdefault('pick_place', {})
     if value['seed']:
         chosen['sim_bridge']['seed'] = int(value['seed'])
     if value['objects']:
@@ -53,14 +60,19 @@ def _nodes(context):
         chosen['pick_place']['clear_view'] = value['perception'] == 'rgbd'
     if value['llm_backend']:
         chosen['lmp_node']['llm_backend'] = value['llm_backend']
+    if value['require_approval']:
+        chosen['lmp_node']['require_approval'] = value['require_approval'].lower() == 'true'
     if value['domain']:
         chosen['lmp_node']['domain'] = value['domain']
         chosen['sim_bridge']['scene'] = domain.scene  # the domain brings its scene, as in `cap up --domain`
-    # The simulator, the domain's perception and control nodes, lmp_node: the nodes of `cap up`'s graph.
-    return [Node(package=spec.package, executable=spec.executable, name=spec.name,
-                 parameters=[_config(spec.package, spec.config_file), chosen.get(spec.name, {})]
-                 + ([] if spec is SIM_BRIDGE_NODE else [{'use_sim_time': True}]), **common)
-            for spec in graph_nodes(domain)]
+    chosen['visualization']['scene'] = domain.scene
+    console = [Node(package='cap_bringup', executable='console', name='console', **common)] \
+        if value['console'].lower() == 'true' else []
+    # The simulator, the domain's perception and control nodes, lmp_node, visualization: `cap up`'s graph.
+    return console + [Node(package=spec.package, executable=spec.executable, name=spec.name,
+                           parameters=[_config(spec.package, spec.config_file), chosen.get(spec.name, {})]
+                           + ([] if spec is SIM_BRIDGE_NODE else [{'use_sim_time': True}]), **common)
+                      for spec in graph_nodes(domain)]
 
 
 def generate_launch_description() -> LaunchDescription:

@@ -29,3 +29,9 @@ def test_every_thread_running_or_started_later_is_on_the_chosen_cpu():
     assert done.returncode == 0, done.stderr
     cpu = allowed[1 % len(allowed)]
     assert done.stdout.split() == [str(cpu), f'[{cpu}]', f'[{cpu}]', f'[{cpu}]']
+
+
+def test_the_cpus_besides_the_graphs_are_the_others():
+    from cap_bringup.cpu_affinity import cpus_besides
+
+    assert cpus_besides(0, [0, 1]) == [1] and cpus_besides(3, [2, 0, 1]) == [1, 2] and cpus_besides(0, [5]) == []

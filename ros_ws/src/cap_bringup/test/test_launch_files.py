@@ -31,7 +31,7 @@ def test_there_is_a_launch_file():
 def test_every_node_of_every_domain_is_an_installed_executable_with_its_config(domain):
     """The launch file starts graph_nodes(domain) by executable and config file; cap up builds node_class."""
     nodes = graph_nodes(get_domain(domain))
-    assert nodes[0].name == 'sim_bridge' and nodes[-1].name == 'lmp_node'
+    assert nodes[0].name == 'sim_bridge' and [spec.name for spec in nodes[-2:]] == ['lmp_node', 'visualization']
     for spec in nodes:
         assert spec.executable in _console_scripts(spec.package), spec
         assert (SRC / spec.package / 'config' / spec.config_file).is_file(), spec
@@ -42,7 +42,7 @@ def test_every_node_of_every_domain_is_an_installed_executable_with_its_config(d
 
 def test_the_table_top_runs_perception_and_pick_and_place():
     assert [spec.name for spec in graph_nodes(get_domain('tabletop'))] == [
-        'sim_bridge', 'perception_node', 'pick_place', 'lmp_node']
+        'sim_bridge', 'perception_node', 'pick_place', 'lmp_node', 'visualization']
 
 
 @pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda path: path.name)

@@ -28,6 +28,10 @@ Limits of one command besides the sandbox's (sandbox.py):
 - **memory**: a command stopped for memory (the watchdog's limit, or a MemoryError) drops the variables it bound;
   if the session still holds more than half the limit afterwards, the session is reset, and the result says so.
 
+Approval (approval.py): with `approval` set, the checked code is first run in plan-only mode (the
+`plan_functions` only record their calls) and the gate is asked with the code and that plan; the program runs only
+once it returns. A rejection, or no approval in time, ends the command as refused; nothing of it ran.
+
 Threads: `run` executes on the calling thread and holds a lock (one command at a time); `cancel()` may be called
 from any thread and stops the running program at its next checkpoint with ExecutionStopped(reason='cancelled').
 """
@@ -44,7 +48,8 @@ import traceback
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping
 
-from cap_lmp.errors import (CapLLMError, CodeRejected, ExecutionStopped, GenerationError, UndefinedName,
+from cap_lmp.approval import ApprovalGate, PlannedCall, recorders
+from cap_lmp.errors import (CapLLMError, CodeRejected, ExecutionStopped, GenerationError, NotApproved, UndefinedName,
                             UnusableAnswer)
 from cap_lmp.functions import top_level_functions, undefined_calls
 from cap_lmp.llm import Completion, CompletionRequest, LLMClient
@@ -215,7 +220,7 @@ class Engine:
                  limits: SandboxLimits | None = None, default_lmp: str | None = None, fgen_lmp: str | None = 'fgen',
                  max_function_depth: int = 4, max_generated_functions: int = 16,
                  model_time_limit_s: float = 120.0, regenerations: int = 0,
-                 regeneration_temperature: float = 0.7) -> None:
+                 regeneration_temperature: float = 0.7, plan_functions: Iterable[str] = ()) -> None:
         self.lmps: dict[str, LMPConfig] = {config.name: config for config in lmps}
         if not self.lmps:
             raise ValueError('an Engine needs at least one LMP')
@@ -229,6 +234,10 @@ class Engine:
         self.model_time_limit_s = model_time_limit_s
         self.regenerations = regenerations
         self.regeneration_temperature = regeneration_temperature
+        # The functions that act on the world (move the robot, speak): a plan-only run records their calls.
+        self.plan_functions = tuple(name for name in plan_functions if name in self.api)
+        self.approval: ApprovalGate | None = None  # set: every command waits for it after a plan-only run
+        self._kept_answers: dict[tuple[Any, ...], PreparedCode] | None = None  # nested LMPs' code of a planned command
         self._listeners: list[Callable[[EngineEvent], None]] = []
         self._cancel = threading.Event()
         self._run_lock = threading.Lock()
@@ -496,13 +505,19 @@ class Engine:
         bad = [name for name in variables if name.startswith('_')]
         if bad:
             raise ValueError(f'variables passed to {lmp} may not start with "_": {", ".join(bad)}')
-        watchdog = self.sandbox.watchdog
-        if watchdog is not None:  # called from a running program: our own host work needs no tracing
-            with watchdog.suspended():
+        key = (lmp, query, context, tuple(sorted(variables)))
+        kept = self._kept_answers
+        prepared = kept.get(key) if kept is not None else None  # planned: the run executes what was approved
+        if prepared is None:
+            watchdog = self.sandbox.watchdog
+            if watchdog is not None:  # called from a running program: our own host work needs no tracing
+                with watchdog.suspended():
+                    prepared = self.generate(lmp, query, context, variables)
+                watchdog.check()
+            else:
                 prepared = self.generate(lmp, query, context, variables)
-            watchdog.check()
-        else:
-            prepared = self.generate(lmp, query, context, variables)
+            if kept is not None:
+                kept[key] = prepared
         self._emit(CODE, lmp, code=prepared.full_code())
         return self._execute(config, prepared, query, context, variables)
 
@@ -525,6 +540,8 @@ class Engine:
             started = time.monotonic()
             prepared: PreparedCode | None = None
             execute_started = started
+            planning = False
+            self._kept_answers = {} if self.approval is not None else None
             kept_scope, kept_functions = dict(self.scope), dict(self.functions)  # names only, for a memory stop
             try:
                 if context is None:
@@ -532,6 +549,12 @@ class Engine:
                 prepared = self.generate(name, command, context)
                 result.code = prepared.full_code()
                 self._emit(CODE, name, code=result.code)
+                if self.approval is not None:
+                    planning = True
+                    plan = self._plan(config, prepared, command, context)
+                    planning = False
+                    self.approval(result.code, plan)
+                    self._check_cancel()
                 self._emit(EXECUTING, name, code=result.code)
                 execute_started = time.monotonic()
                 self.scope.update(self._fixed_names)
@@ -541,7 +564,11 @@ class Engine:
                 result.outcome = Outcome.DONE
             except Exception as error:  # everything a generated program can cause ends here, reported
                 self._report_failure(result, error)
+                if planning and not isinstance(error, NotApproved):
+                    result.message = f'the plan-only run failed, so nothing moved: {result.message}'
                 del error  # its traceback holds the program's frames and their memory
+            finally:
+                self._kept_answers = None
             if result.stop_reason == 'memory' or result.error_type == 'MemoryError':
                 result.message += self._recover_memory(kept_scope, kept_functions)
             del kept_scope, kept_functions
@@ -560,6 +587,25 @@ class Engine:
             else:
                 self._emit(ERROR, name, code=result.code, message=result.message)
             return result
+
+    def _plan(self, config: LMPConfig, prepared: PreparedCode, query: str, context: str) -> list[PlannedCall]:
+        """Run the program in plan-only mode (see approval.py) and return the calls it would make of the
+        plan_functions. The session is left as it was: the run works on copies of its scope, histories and
+        functions (nested LMPs included), and a generated function defined for it sees the recorders too."""
+        plan: list[PlannedCall] = []
+        kept = self.scope, self.histories, self.functions
+        scope = dict(self.scope)
+        scope.update(self._fixed_names)
+        scope.update(recorders(self.plan_functions, plan))
+        self.scope = scope
+        self.histories = {name: list(history) for name, history in self.histories.items()}
+        self.functions = dict(self.functions)
+        try:
+            with self.sandbox.watching(self._cancel):
+                self._execute(config, prepared, query, context)
+        finally:
+            self.scope, self.histories, self.functions = kept
+        return plan
 
     def _report_failure(self, result: CommandResult, error: Exception) -> None:
         """Describe the failure; a message that cannot be built (a program's exception can carry anything) is

@@ -37,7 +37,7 @@ from typing import Any, Callable
 from cap_lmp import wire
 from cap_lmp.sandbox.jail import enter_jail
 from cap_lmp.engine import CommandResult
-from cap_lmp.errors import CodeRejected, LLMError, RobotApiError
+from cap_lmp.errors import CodeRejected, ExecutionStopped, LLMError, NotApproved, RobotApiError
 from cap_lmp.llm import Completion, CompletionRequest
 from cap_lmp.wire import API_ERRORS, MAX_CODE_CHARS, MAX_PROMPT_CHARS, MEMORY_EXIT_CODE
 
@@ -187,6 +187,25 @@ class _ParentModel:
                           latency_s=float(value['latency_s']), source=str(value['source']))
 
 
+def _approval_gate(channel: _Channel) -> Callable[[str, list], None]:
+    """The engine's approval gate here: the parent asks a person (cap_lmp.approval) and answers go or why not."""
+
+    def ask(code: str, plan: list) -> None:
+        try:
+            reply = channel.request({'op': 'approve', 'code': code[:MAX_CODE_CHARS],
+                                     'plan': [call.to_wire() for call in plan]})
+        except wire.WireError as error:
+            raise NotApproved(f'the plan could not be sent for approval ({error}); nothing ran', 'rejected') from None
+        error = reply.get('error')
+        if error:
+            text = str(error.get('message', ''))
+            if error.get('type') == 'ExecutionStopped':
+                raise ExecutionStopped(text or 'the program was cancelled', 'cancelled')
+            raise NotApproved(text, str(error.get('reason', 'rejected'))[:50])
+
+    return ask
+
+
 def _proxy(channel: _Channel, name: str, functions: bool = False) -> Callable[..., Any]:
     def call_robot(*args: Any, **kwargs: Any) -> Any:
         return channel.call(name, args, kwargs, functions)
@@ -242,6 +261,7 @@ def serve(connection: Connection, control: Connection) -> None:
         channel.send({'op': 'event', **fields})
 
     engine.add_listener(forward)
+    gate = _approval_gate(channel)
 
     def watch_control() -> None:
         try:
@@ -284,6 +304,7 @@ def serve(connection: Connection, control: Connection) -> None:
             runs['current'] = run_id if isinstance(run_id, int) else 0
             channel.call_seconds.clear()
             lmp, context = message.get('lmp'), message.get('context')
+            engine.approval = gate if message.get('approval') is True else None
             command = str(message.get('command', ''))
             if lmp is not None and (not isinstance(lmp, str) or lmp not in engine.lmps):
                 outcome = CommandResult(command=command, command_id=0, success=False,

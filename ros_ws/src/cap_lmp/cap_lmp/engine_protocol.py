@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Callable, Protocol, runtime_checkable
 
+from cap_lmp.approval import ApprovalGate
 from cap_lmp.engine import CommandResult, EngineEvent
 
 
@@ -12,6 +13,7 @@ class CommandEngine(Protocol):
     """Runs one command at a time in a session; `cancel` may be called from any thread."""
 
     default_lmp: str  # the LMP a command goes to; events of other LMPs are nested calls
+    approval: ApprovalGate | None  # set: each program is planned and runs only once this gate returns (approval.py)
 
     def run(self, command: str) -> CommandResult:
         """Run one command end to end; never raises for problems of the generated code."""

@@ -49,6 +49,15 @@ class OperationRefused(SandboxError):
     """An operation the sandbox does not allow at run time (e.g. a format field that looks up an attribute)."""
 
 
+class NotApproved(CapLLMError):
+    """The generated code was not approved to run: a person rejected it, or nobody approved it in time (see
+    approval.py). Nothing of it ran; `reason` is 'rejected' or 'timeout'."""
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
 class GenerationError(CapLLMError):
     """Code generation failed: the model defined the wrong function, a depth or cycle limit was hit, ..."""
 

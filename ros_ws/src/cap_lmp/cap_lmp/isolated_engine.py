@@ -32,6 +32,11 @@ when:
 - **protocol**: a malformed, over-long or out-of-turn message, or a send that did not complete within
   `send_timeout_s` ('protocol').
 
+Approval (cap_lmp.approval): with `approval` set, each run asks the sandbox process for a plan-only run, and its
+'approve' request (the code and the recorded calls, checked here) is answered by the gate, on a thread of its own
+so that a cancel or a dead process does not wait; the time it waits counts neither as the program's nor as the
+model's, and is no stall.
+
 The process also has an address-space limit (RLIMIT_AS): a MemoryError inside the program is reported like any
 exception, and the engine then drops what the command bound (or resets the session if it still holds too much, and
 says so). A lost process means a lost session (variables and generated functions); a new process is started at once
@@ -56,8 +61,9 @@ import time
 from typing import Any, Callable, Mapping, Sequence
 
 from cap_lmp import wire
+from cap_lmp.approval import MAX_PLANNED_CALLS, ApprovalGate, planned_call
 from cap_lmp.engine import CODE, DONE, ERROR, EXECUTING, GENERATING, CommandResult, EngineEvent, check_program_size
-from cap_lmp.errors import CapLLMError, CodeRejected, SandboxProcessLost
+from cap_lmp.errors import CapLLMError, CodeRejected, ExecutionStopped, NotApproved, SandboxProcessLost
 from cap_lmp.llm import Completion, CompletionRequest, LLMClient
 from cap_lmp.outcome import Outcome, outcome_of
 from cap_lmp.safe_text import MAX_MESSAGE_CHARS, wire_text
@@ -145,19 +151,23 @@ class _Clock:
         self.started = self.clock_started = self.last_call_end = time.monotonic()
         self.model_s = 0.0  # of the whole command
         self.model_in_clock_s = 0.0  # since clock_started
+        self.paused_in_clock_s = 0.0  # waiting for approval, since clock_started
         self.executing = False
 
     def start_execution(self, now: float) -> None:
         if not self.executing:  # once per command: a process cannot restart its clock by repeating the event
             self.executing = True
-            self.clock_started, self.model_in_clock_s = now, 0.0
+            self.clock_started, self.model_in_clock_s, self.paused_in_clock_s = now, 0.0, 0.0
 
     def add_model_time(self, seconds: float) -> None:
         self.model_s += seconds
         self.model_in_clock_s += seconds
 
+    def add_paused_time(self, seconds: float) -> None:
+        self.paused_in_clock_s += seconds
+
     def program_s(self, now: float) -> float:
-        return now - self.clock_started - self.model_in_clock_s
+        return now - self.clock_started - self.model_in_clock_s - self.paused_in_clock_s
 
 
 def _result(values: Any) -> CommandResult:
@@ -279,6 +289,7 @@ class IsolatedEngine:
         self.send_timeout_s = send_timeout_s
         self.default_lmp = ''
         self.restarts = 0
+        self.approval: ApprovalGate | None = None  # set: each command is planned and waits for it (approval.py)
         # Robot API round trips as generated code saw them (socket and node included), over recent commands.
         self.api_call_seconds: list[float] = []
         self._listeners: list[Callable[[EngineEvent], None]] = []
@@ -511,7 +522,8 @@ class IsolatedEngine:
         limit_s = self.limits.time_limit_s + KILL_MARGIN_S
         run_lmp = lmp or self.default_lmp
         try:
-            self._send({'op': 'run', 'command': command, 'run': self._run_id, 'lmp': lmp, 'context': context})
+            self._send({'op': 'run', 'command': command, 'run': self._run_id, 'lmp': lmp, 'context': context,
+                        'approval': self.approval is not None})
             last_heard = clock.started
             while True:
                 message = self._receive(0.05)
@@ -533,6 +545,9 @@ class IsolatedEngine:
                     elif op == 'complete':
                         self._send(self._complete(message, clock))
                         last_heard = clock.last_call_end = time.monotonic()  # nor the model's
+                    elif op == 'approve':
+                        self._send(self._approve(message, clock))
+                        last_heard = clock.last_call_end = time.monotonic()  # nor a person's
                     elif op == 'result':
                         result = _result(message.get('result'))
                         self._keep_call_times(message.get('api_call_seconds'))
@@ -622,15 +637,64 @@ class IsolatedEngine:
                 done.set()
 
         threading.Thread(target=ask, name='model_request', daemon=True).start()
+        return self._await(done, box, give_up_at, 'the command was cancelled while it waited for the model')
+
+    def _await(self, done: threading.Event, box: dict[str, Any], give_up_at: float, cancelled: str) -> Any:
+        """box['outcome'] once `done` is set; `cancelled` on a cancel, '' past `give_up_at`; _ProcessLost when the
+        process died meanwhile."""
         while not done.wait(0.05):
             if self._process is None or self._process.poll() is not None:
                 raise _ProcessLost('crashed')
             with self._state_lock:
                 if self._cancel_at is not None:
-                    return 'the command was cancelled while it waited for the model'
+                    return cancelled
             if time.monotonic() > give_up_at:
                 return ''
         return box['outcome']
+
+    # -------------------------------------------------------------------------------------------- approval
+    def _approve(self, message: dict[str, Any], clock: _Clock) -> bytes:
+        """Ask the approval gate about the program's code and plan; the encoded reply says go, or why not."""
+        reply: dict[str, Any] = {'op': 'reply', 'id': message.get('id')}
+        code, values = message.get('code'), message.get('plan')
+        if not isinstance(code, str) or not isinstance(values, list) or len(values) > MAX_PLANNED_CALLS:
+            raise _ProcessLost('protocol')
+        try:
+            plan = [planned_call(value) for value in values]
+        except ValueError:
+            raise _ProcessLost('protocol') from None
+        gate = self.approval
+        if gate is None:  # switched off after the run began: nobody is asked, the program may run
+            return wire.encode(reply)
+        box: dict[str, Any] = {}
+        done = threading.Event()
+
+        def ask() -> None:
+            try:
+                gate(code[:wire.MAX_CODE_CHARS], plan)
+                box['outcome'] = None
+            except BaseException as error:  # the gate's answer: rejected, timed out, cancelled
+                box['outcome'] = error
+            finally:
+                done.set()
+
+        started = time.monotonic()
+        threading.Thread(target=ask, name='approval', daemon=True).start()
+        try:
+            outcome = self._await(done, box, float('inf'), 'cancelled')
+        finally:
+            clock.add_paused_time(time.monotonic() - started)
+        if outcome is None:
+            return wire.encode(reply)
+        if outcome == 'cancelled' or isinstance(outcome, ExecutionStopped):
+            reply['error'] = {'type': 'ExecutionStopped', 'message': 'the program was cancelled'}
+        elif isinstance(outcome, NotApproved):
+            reply['error'] = {'type': 'NotApproved', 'message': wire_text(str(outcome), 2000),
+                              'reason': outcome.reason}
+        else:
+            reply['error'] = {'type': 'NotApproved', 'reason': 'rejected',
+                              'message': wire_text(f'the approval failed: {type(outcome).__name__}: {outcome}', 2000)}
+        return wire.encode(reply)
 
     def _model_deadline_text(self, clock: _Clock) -> str:
         return (f'the model deadline of {self.model_time_limit_s:g} s for one command passed (the model took '

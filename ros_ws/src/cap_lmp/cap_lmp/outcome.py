@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import enum
 
-from cap_lmp.errors import CodeRejected, ExecutionStopped, GenerationError, LLMError, SandboxProcessLost, StoppedError
+from cap_lmp.errors import (CodeRejected, ExecutionStopped, GenerationError, LLMError, NotApproved, SandboxProcessLost,
+                            StoppedError)
 
 
 class Outcome(str, enum.Enum):
-    """DONE: the program ran to its end. REFUSED: the code was refused before it ran (nothing moved).
+    """DONE: the program ran to its end. REFUSED: the code was refused before it ran, by the checks or by the
+    person who was asked to approve it (nothing moved).
     CANCELLED: a stop or cancel ended it. MODEL_ERROR: the model gave no usable code (an endpoint failure, wrong
     function generated, the model deadline). ERROR: anything else (the program raised, a limit stopped it)."""
 
@@ -24,7 +26,7 @@ class Outcome(str, enum.Enum):
 
 def outcome_of(error: BaseException) -> Outcome:
     """The outcome of a command that ended with `error` (raised by the engine, the sandbox or the robot API)."""
-    if isinstance(error, (CodeRejected, SyntaxError)):
+    if isinstance(error, (CodeRejected, SyntaxError, NotApproved)):
         return Outcome.REFUSED
     if isinstance(error, StoppedError):
         return Outcome.CANCELLED

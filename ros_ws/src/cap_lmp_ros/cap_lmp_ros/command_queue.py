@@ -47,6 +47,9 @@ class Job:
     goal_handle: Any = None  # the /cap/execute goal waiting for this job, if it came as one
     outcome: Outcome | None = None  # how it ended; None while it waits or runs
     refusal: str = ''  # why it was refused without running, in words
+    awaiting_approval: bool = False  # its code waits for a person's approval (lmp_node's require_approval)
+    decided: threading.Event = field(default_factory=threading.Event)  # set with `decision`
+    decision: tuple[bool, str] = (False, '')  # (approved, the reason given)
 
 
 class CommandQueue:

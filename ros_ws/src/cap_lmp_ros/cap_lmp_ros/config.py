@@ -47,7 +47,13 @@ class LmpNodeConfig:
                                    'the simulator on a 2-core machine).')
     model_context: int = parameter(8192, 'With llm_backend=local: context size of the model server [tokens].')
     model_port: int = parameter(0, 'With llm_backend=local: loopback port of the model server; 0: a free one.')
+    require_approval: bool = parameter(False, 'Hold each generated program until a person approves it: its code and '
+                                       'the robot actions a plan-only run of it found are shown on /cap/status '
+                                       '(STAGE_AWAITING_APPROVAL); approve or reject it with /cap/approve.')
+    approval_timeout_s: float = parameter(300.0, 'With require_approval: a program not approved within this time '
+                                          'is dropped (refused) [s].')
 
 
 # Parameters whose change at run time takes effect from the next command; any other change is rejected.
-RUNTIME_PARAMETERS = ('max_queued_commands', 'service_timeout_s', 'motion_timeout_s')
+RUNTIME_PARAMETERS = ('max_queued_commands', 'service_timeout_s', 'motion_timeout_s', 'require_approval',
+                      'approval_timeout_s')

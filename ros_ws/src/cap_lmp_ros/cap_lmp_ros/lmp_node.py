@@ -8,6 +8,12 @@ what happened). Every stage is published on /cap/status; the generated code on /
 /cap/say. /cap/stop ends the running program and its motion and drops waiting commands. /cap/reset_session forgets
 the session.
 
+With `require_approval`, each program waits after its code is generated and checked: a plan-only run lists the
+robot actions it would take (cap_lmp.approval; the domain says which functions act and what their calls mean), the
+code and that plan are published on /cap/status (STAGE_AWAITING_APPROVAL, with `plan`), and the program runs only
+once /cap/approve approves it. A rejection, or no answer within `approval_timeout_s`, ends the command as refused
+(nothing of it ran); a stop ends it as cancelled.
+
 Whatever a program or a model produced is made safe before it leaves the node (safe_text.wire_text: valid UTF-8,
 bounded; logs also without control characters), so no text can kill the thread that publishes it. If the worker
 thread dies anyway, the node refuses every later command naming the cause, and the standalone process (`main`)
@@ -23,6 +29,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import time
 from typing import Any
 
 import rclpy
@@ -33,16 +40,19 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.task import Future
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from geometry_msgs.msg import Point
 from std_msgs.msg import Empty, String
 from std_srvs.srv import Trigger
 
 from cap_interfaces.action import ExecuteCommand
-from cap_interfaces.msg import GraphNames, StatusEvent
+from cap_interfaces.msg import GraphNames, PlannedMotion, StatusEvent
+from cap_interfaces.srv import ApproveCommand
 from cap_lmp import engine as engine_module
+from cap_lmp.approval import PlannedCall
 from cap_lmp.cassette import make_client
 from cap_lmp.engine_protocol import CommandEngine
 from cap_lmp.isolated_engine import JAIL_MODES, IsolatedEngine
-from cap_lmp.errors import LLMError
+from cap_lmp.errors import ExecutionStopped, LLMError, NotApproved
 from cap_lmp.llm import NO_MODEL_CONFIGURED
 from cap_lmp.local_model import INSTALL_HINT
 from cap_lmp.local_server import LocalModelClient, LocalModelServer, ServerSettings, server_binary, warm_up
@@ -53,6 +63,7 @@ from cap_lmp.wire import MAX_CODE_CHARS
 from cap_lmp_ros.command_queue import CommandQueue, Job
 from cap_lmp_ros.config import RUNTIME_PARAMETERS, LmpNodeConfig
 from cap_lmp_ros.domains.registry import engine_api, get_domain, prompt_heads
+from cap_lmp_ros.plan_steps import PlanStep, plan_summary
 from cap_lmp_ros.thread_watch import FATAL_EXIT_CODE, ThreadWatch
 from cap_ros_common.parameters import declare_config, parameter_names
 
@@ -137,6 +148,9 @@ class LmpNode(Node):
         self.robot = self.domain.robot_api(self, say_publisher, config.service_timeout_s, config.motion_timeout_s)
         api = engine_api(self.domain, self.robot.functions())
         limits = SandboxLimits(time_limit_s=config.time_limit_s)
+        engine_options = {'regenerations': config.regenerations, 'plan_functions': list(self.domain.plan_functions)}
+        self.require_approval = config.require_approval
+        self.approval_timeout_s = config.approval_timeout_s
         self.engine: CommandEngine
         self.model_ready = threading.Event()  # with llm_backend=local: set once the model has read the prompts
         self.model_ready_generation = 0  # the server start whose warm-up finished last
@@ -147,13 +161,13 @@ class LmpNode(Node):
             isolated = IsolatedEngine(self.domain.build_engine, api, client, limits,
                                       stall_limit_s=config.stall_limit_s,
                                       model_time_limit_s=config.model_time_limit_s, jail=config.jail,
-                                      engine_options={'regenerations': config.regenerations},
+                                      engine_options=engine_options,
                                       function_arguments=self.domain.function_arguments)
             where = f'sandbox process {isolated.pid}'
             self.engine = isolated
         else:
             self.engine = self.domain.build_engine(api, client, limits, model_time_limit_s=config.model_time_limit_s,
-                                                   regenerations=config.regenerations)
+                                                   **engine_options)
             where = 'in-process sandbox'
         self.engine.add_listener(self._on_engine_event)
         bind_engine = getattr(self.robot, 'bind_engine', None)
@@ -173,6 +187,7 @@ class LmpNode(Node):
         self.create_subscription(Empty, GraphNames.STOP_TOPIC, lambda _: self.stop(stopped),
                                  COMMAND_QOS, callback_group=control)
         self.create_service(Trigger, GraphNames.RESET_SESSION_SERVICE, self._on_reset, callback_group=control)
+        self.create_service(ApproveCommand, GraphNames.APPROVE_SERVICE, self._on_approve, callback_group=control)
         self._action = ActionServer(self, ExecuteCommand, GraphNames.EXECUTE_ACTION, self._execute_goal,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                     callback_group=ReentrantCallbackGroup())
@@ -245,7 +260,10 @@ class LmpNode(Node):
             value = parameter.value
             if parameter.name == 'max_queued_commands' and (not isinstance(value, int) or value < 0):
                 return SetParametersResult(successful=False, reason='max_queued_commands must be 0 or more')
-            if parameter.name != 'max_queued_commands' and (not isinstance(value, float) or not value > 0):
+            if parameter.name == 'require_approval' and not isinstance(value, bool):
+                return SetParametersResult(successful=False, reason='require_approval is true or false')
+            if parameter.name not in ('max_queued_commands', 'require_approval') and (
+                    not isinstance(value, float) or not value > 0):
                 return SetParametersResult(successful=False, reason=f'{parameter.name} must be more than 0 s')
         for parameter in parameters:
             if parameter.name == 'max_queued_commands':
@@ -254,6 +272,10 @@ class LmpNode(Node):
                 self.robot.service_timeout_s = parameter.value
             elif parameter.name == 'motion_timeout_s':
                 self.robot.motion_timeout_s = parameter.value
+            elif parameter.name == 'require_approval':
+                self.require_approval = parameter.value
+            elif parameter.name == 'approval_timeout_s':
+                self.approval_timeout_s = parameter.value
         return SetParametersResult(successful=True)
 
     def _refuse_waiting(self, failure: str) -> None:
@@ -346,6 +368,7 @@ class LmpNode(Node):
             begin_command = getattr(self.robot, 'begin_command', None)  # optional (see RobotBinding)
             if begin_command is not None:
                 begin_command()
+            self.engine.approval = self._await_approval if self.require_approval else None
             try:
                 job.result = self.engine.run(job.command)
                 job.outcome = self._outcome(job)
@@ -388,16 +411,72 @@ class LmpNode(Node):
             message = event.message if top_level else f'{event.lmp}: generating'
             self._publish_status(job, _STAGES[event.stage], code=event.code if top_level else '', message=message)
 
-    def _publish_status(self, job: Job, stage: int, code: str = '', message: str = '') -> None:
+    def _publish_status(self, job: Job, stage: int, code: str = '', message: str = '',
+                        plan: list[PlannedMotion] | None = None) -> None:
         if self._closing:
             return
         status = StatusEvent(command_id=job.command_id, command=wire_text(job.command), stage=stage,
-                             code=wire_text(code, MAX_CODE_CHARS), message=wire_text(message))
+                             code=wire_text(code, MAX_CODE_CHARS), message=wire_text(message), plan=plan or [])
         status.header.stamp = self.get_clock().now().to_msg()
         self._status_publisher.publish(status)
         goal_handle = job.goal_handle
         if goal_handle is not None:
             goal_handle.publish_feedback(ExecuteCommand.Feedback(status=status))
+
+    # -------------------------------------------------------------------------------------------- approval
+    def _await_approval(self, code: str, calls: list[PlannedCall]) -> None:
+        """The engine's approval gate (on the worker thread): show the code and its plan, wait for /cap/approve.
+
+        Returns when approved; raises NotApproved when rejected or not approved within approval_timeout_s, and
+        ExecutionStopped when the command is stopped meanwhile."""
+        job = self._current
+        if job is None:
+            raise NotApproved('no command is running', 'rejected')
+        steps = [self._plan_step(call) for call in calls]
+        timeout_s = self.approval_timeout_s
+        service = self.resolve_topic_name(GraphNames.APPROVE_SERVICE)
+        job.decided.clear()
+        job.awaiting_approval = True
+        try:
+            self._publish_status(job, StatusEvent.STAGE_AWAITING_APPROVAL, code=code, plan=[
+                _planned_motion(step) for step in steps], message=(
+                    f'waiting for approval on {service} (within {timeout_s:g} s): {plan_summary(steps)}'))
+            deadline = time.monotonic() + timeout_s
+            while not job.decided.wait(0.05):
+                if job.cancel_requested or self._closing:
+                    raise ExecutionStopped('the program was cancelled while it waited for approval', 'cancelled')
+                if time.monotonic() > deadline:
+                    raise NotApproved(f'not approved within {timeout_s:g} s (approval_timeout_s), so nothing ran',
+                                      'timeout')
+        finally:
+            job.awaiting_approval = False
+        approved, reason = job.decision
+        if not approved:
+            raise NotApproved('rejected' + (f': {reason}' if reason else '') + '; nothing ran', 'rejected')
+
+    def _plan_step(self, call: PlannedCall) -> PlanStep:
+        try:
+            return self.domain.describe_call(call)
+        except Exception as error:  # a domain's describer must not lose the plan: show the bare call
+            self._log_error(f'describing a planned {call.function}() failed: {error!r}')
+            return PlanStep(call.function, f'{call.function}(...)')
+
+    def _on_approve(self, request: ApproveCommand.Request,
+                    response: ApproveCommand.Response) -> ApproveCommand.Response:
+        job = self._current
+        if job is None or not job.awaiting_approval or job.decided.is_set() or job.command_id != request.command_id:
+            waiting = (f'; {job.command_id} waits' if job is not None and job.awaiting_approval
+                       and not job.decided.is_set() else '; no command waits for approval')
+            response.success = False
+            response.message = wire_text(f'command {request.command_id!r} does not wait for approval{waiting}')
+            return response
+        job.decision = (bool(request.approve), wire_text(request.reason, 500))
+        job.decided.set()
+        response.success = True
+        response.message = f'{job.command_id} ' + ('approved: it runs now' if request.approve else
+                                                   'rejected: it will not run')
+        self.get_logger().info(terminal_text(response.message))
+        return response
 
     # -------------------------------------------------------------------------------------------- stop, reset
     def _stop_running(self) -> None:
@@ -436,6 +515,12 @@ class LmpNode(Node):
         if self.model_server is not None:
             self.model_server.stop()
         super().destroy_node()
+
+
+def _planned_motion(step: PlanStep) -> PlannedMotion:
+    return PlannedMotion(function=wire_text(step.function, 100), object_name=wire_text(step.object_name, 200),
+                         target_name=wire_text(step.target_name, 200), description=wire_text(step.description, 500),
+                         points=[Point(x=x, y=y, z=z) for x, y, z in step.points[:100]])
 
 
 def main(args=None) -> None:

@@ -17,8 +17,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Protocol
 
+from cap_lmp.approval import PlannedCall
 from cap_lmp.engine import Engine
 from cap_lmp.isolated_engine import builder_reference
+from cap_lmp_ros.plan_steps import PlanStep, describe_as_call
 
 
 class RobotBinding(Protocol):
@@ -77,7 +79,13 @@ PICK_PLACE_NODE = NodeSpec('pick_place', 'cap_control', 'pick_place', 'cap_contr
 class Domain:
     """One robot domain. `robot_functions` are the names `robot_api(...).functions()` binds over ROS; `scene` names
     the simulator scene it runs in; `cassette` is the replay cassette used when none is configured; `nodes` are the
-    perception and control nodes its robot API talks to, started between the simulator and lmp_node."""
+    perception and control nodes its robot API talks to, started between the simulator and lmp_node.
+
+    For approval (lmp_node's require_approval): `query_functions` are the robot functions that only read the world;
+    a plan-only run calls them and records every other robot function instead of calling it (so a domain that
+    declares none has every call recorded: nothing moves while planning). `describe_call` says what a recorded
+    call means (plan_steps.PlanStep).
+    """
 
     name: str
     build_engine: EngineBuilder
@@ -89,6 +97,13 @@ class Domain:
     # Robot functions that take a function of the program (a controller): they receive a handle to it, which the
     # binding calls through the engine's invoke (IsolatedEngine).
     function_arguments: tuple[str, ...] = ()
+    query_functions: tuple[str, ...] = ()
+    describe_call: Callable[[PlannedCall], PlanStep] = describe_as_call
+
+    @property
+    def plan_functions(self) -> tuple[str, ...]:
+        """The robot functions a plan-only run records instead of calling."""
+        return tuple(name for name in self.robot_functions if name not in self.query_functions)
 
     def __post_init__(self) -> None:
         builder_reference(self.build_engine)  # a one-line ValueError now, not when the sandbox process starts

@@ -8,8 +8,10 @@ from typing import Any
 
 from cap_lmp_ros.domains.registry import PERCEPTION_NODE, Domain, NodeSpec, RobotBinding
 from cap_lmp_ros.domains.whiteboard.lmps import build_engine
+from cap_lmp_ros.domains.whiteboard.plan import describe_call
 
 ROBOT_FUNCTIONS = ('get_obj_names', 'get_obj_pos', 'draw', 'erase', 'say')
+QUERY_FUNCTIONS = ('get_obj_names', 'get_obj_pos')  # read the world only: a plan-only run calls them
 FOLLOW_PATH_NODE = NodeSpec('follow_path', 'cap_control', 'follow_path', 'cap_control.follow_path_node:FollowPathNode',
                             'follow_path.yaml')
 
@@ -23,4 +25,4 @@ def robot_api(node: Any, say_publisher: Any, service_timeout_s: float, motion_ti
 DOMAIN = Domain(name='whiteboard', build_engine=build_engine, robot_functions=ROBOT_FUNCTIONS, robot_api=robot_api,
                 scene='whiteboard',
                 cassette=Path(__file__).resolve().parent / 'cassettes' / 'whiteboard_reference.yaml',
-                nodes=(PERCEPTION_NODE, FOLLOW_PATH_NODE))
+                nodes=(PERCEPTION_NODE, FOLLOW_PATH_NODE), query_functions=QUERY_FUNCTIONS, describe_call=describe_call)

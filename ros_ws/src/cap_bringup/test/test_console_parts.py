@@ -1,0 +1,208 @@
+"""The console's parts without ROS: images to JPEG, the page's state from status events, and the web server's
+guards, page and camera streams, against a backend in memory (the console node is the real one; see
+tests/test_console.py for the page in a browser against the graph)."""
+from __future__ import annotations
+
+import array
+import asyncio
+import http.client
+import json
+import threading
+import time
+
+import cv2
+import numpy as np
+import pytest
+from aiohttp import ClientSession, WSServerHandshakeError
+
+from cap_bringup.console.frames import FrameChannel, RawImage, UnsupportedImage, encode_jpeg, image_array
+from cap_bringup.console.server import ConsoleServer
+from cap_bringup.console.state import ConsoleState, StatusRecord
+
+
+def _rgb(width: int = 64, height: int = 48, colour: tuple[int, int, int] = (255, 0, 0)) -> RawImage:
+    pixels = np.zeros((height, width, 3), np.uint8)
+    pixels[:] = colour
+    return RawImage('rgb8', width, height, width * 3, array.array('B', pixels.tobytes()), 1.5, 2.5)
+
+
+def test_an_rgb_image_becomes_a_jpeg_of_the_same_picture():
+    decoded = cv2.imdecode(np.frombuffer(encode_jpeg(_rgb()), np.uint8), cv2.IMREAD_COLOR)
+    assert decoded.shape == (48, 64, 3)
+    assert np.allclose(decoded[24, 32], [0, 0, 255], atol=8)  # BGR: red
+
+
+def test_depth_is_shown_as_grey_and_other_encodings_are_refused_with_a_reason():
+    depth = np.full((4, 4), 1.0, np.float32)
+    depth[0, 0] = np.inf
+    grey = image_array(RawImage('32FC1', 4, 4, 16, depth.tobytes()))
+    assert grey.dtype == np.uint8 and grey[0, 0] == 0 and 0 < grey[1, 1] < 255
+    with pytest.raises(UnsupportedImage, match='yuv422'):
+        image_array(RawImage('yuv422', 4, 4, 8, bytes(32)))
+    with pytest.raises(UnsupportedImage, match='less data'):
+        image_array(RawImage('rgb8', 4, 4, 12, bytes(10)))
+
+
+def test_padded_rows_are_read_by_their_step():
+    pixels = np.zeros((2, 8), np.uint8)
+    pixels[:, :2] = 200  # 2 pixels of mono8 per row, then 6 bytes of padding
+    assert image_array(RawImage('mono8', 2, 2, 8, pixels.tobytes())).tolist() == [[200, 200], [200, 200]]
+
+
+def test_a_channel_encodes_each_frame_once_whoever_asks():
+    channel = FrameChannel('/cap/sim/cameras/front/color')
+    assert channel.frame() is None
+    channel.put(_rgb())
+    first = channel.frame()
+    assert first is channel.frame() and first.number == 1 and first.stamp_s == 1.5
+    channel.put(_rgb(colour=(0, 255, 0)))
+    assert channel.frame().number == 2
+
+
+def test_the_state_follows_a_command_from_receipt_to_outcome():
+    state = ConsoleState(history_size=2)
+    state.on_status(StatusRecord('', '', 'model', message='ready: domain tabletop'))
+    state.on_status(StatusRecord('cmd-1', 'stack the blocks', 'received'))
+    state.on_status(StatusRecord('cmd-1', 'stack the blocks', 'awaiting_approval', code='put_first_on_second()',
+                                 plan=({'description': 'put the red block on the blue block'},)))
+    assert state.awaiting_approval() == ['cmd-1']
+    state.on_status(StatusRecord('cmd-1', 'stack the blocks', 'executing'))
+    state.on_say('stacking')
+    state.on_status(StatusRecord('cmd-1', 'stack the blocks', 'done', message='done'))
+    (entry,) = state.snapshot()['commands']
+    assert entry['outcome'] == 'done' and entry['said'] == ['stacking'] and entry['code'] == 'put_first_on_second()'
+    assert entry['plan'] == [{'description': 'put the red block on the blue block'}]
+    assert state.snapshot()['graph'] == 'ready: domain tabletop' and state.awaiting_approval() == []
+    for number in range(2, 5):
+        state.on_status(StatusRecord(f'cmd-{number}', 'say hi', 'done'))
+    assert [c['id'] for c in state.snapshot()['commands']] == ['cmd-3', 'cmd-4']  # the history is bounded
+
+
+def test_a_restarted_lmp_node_ends_what_was_open_and_its_reused_ids_are_new_commands():
+    state = ConsoleState()
+    state.on_status(StatusRecord('cmd-1', 'wave', 'done'))
+    state.on_status(StatusRecord('cmd-2', 'stack the blocks', 'executing'))
+    state.on_status(StatusRecord('', '', 'model', message='ready: domain tabletop'))
+    state.on_status(StatusRecord('cmd-1', 'say hi', 'received'))
+    commands = state.snapshot()['commands']
+    assert [(c['id'], c['command'], c['outcome']) for c in commands] == [
+        ('cmd-1', 'wave', 'done'), ('cmd-2', 'stack the blocks', 'lost'), ('cmd-1', 'say hi', '')]
+
+
+class MemoryBackend:
+    """The ConsoleBackend of these tests: one image topic, requests recorded."""
+
+    TOPIC = '/cap/sim/cameras/front/color'
+
+    def __init__(self) -> None:
+        self.state = ConsoleState()
+        self.channel = FrameChannel(self.TOPIC)
+        self.requests: list[tuple] = []
+        self.unwatched = threading.Event()
+
+    def run_command(self, text: str) -> None:
+        self.requests.append(('run', text))
+
+    def stop(self) -> None:
+        self.requests.append(('stop',))
+
+    def reset_session(self) -> None:
+        self.requests.append(('reset',))
+
+    def approve(self, command_id: str, approve: bool) -> None:
+        self.requests.append(('approve', command_id, approve))
+
+    def watch(self, topic: str):
+        if topic != self.TOPIC:
+            return None
+        self.channel.viewers += 1
+        return self.channel
+
+    def unwatch(self, topic: str) -> None:
+        self.channel.viewers -= 1
+        self.unwatched.set()
+
+
+@pytest.fixture
+def served():
+    backend = MemoryBackend()
+    server = ConsoleServer(backend, port=0, max_fps=50.0)
+    server.start()
+    yield backend, server
+    server.close()
+
+
+def _get(server: ConsoleServer, path: str, host: str | None = None) -> tuple[int, bytes, dict]:
+    connection = http.client.HTTPConnection('127.0.0.1', server.port, timeout=10)
+    connection.request('GET', path, headers={'Host': host} if host else {})
+    response = connection.getresponse()
+    body = response.read()
+    connection.close()
+    return response.status, body, dict(response.getheaders())
+
+
+def test_the_page_and_its_files_are_served_from_here_only(served):
+    _, server = served
+    status, body, headers = _get(server, '/')
+    assert status == 200 and b'/static/console.js' in body and b'http' not in body.replace(b'http-equiv', b'')
+    assert "default-src 'self'" in headers['Content-Security-Policy']
+    assert _get(server, '/static/console.js')[0] == 200
+    assert _get(server, '/static/..%2Fserver.py')[0] == 404
+    assert _get(server, '/', host='evil.example:80')[0] == 403  # a rebound name is not this console
+
+
+def test_the_websocket_takes_requests_from_the_console_page_only(served):
+    backend, server = served
+
+    async def talk() -> list[dict]:
+        replies = []
+        async with ClientSession() as session:
+            with pytest.raises(WSServerHandshakeError):
+                await session.ws_connect(f'{server.url}api/events', origin='http://evil.example')
+            async with session.ws_connect(f'{server.url}api/events', origin=server.url.rstrip('/')) as socket:
+                replies.append(await socket.receive_json(timeout=10))
+                for request in ({'op': 'run', 'command': 'stack the blocks'}, {'op': 'stop'},
+                                {'op': 'approve', 'command_id': 'cmd-1'}, {'op': 'run', 'command': 'x' * 3000},
+                                {'op': 'launch'}):
+                    await socket.send_str(json.dumps(request))
+                for _ in range(2):
+                    replies.append(await socket.receive_json(timeout=10))
+        return replies
+
+    state, *refusals = asyncio.run(talk())
+    assert state['type'] == 'state' and state['state']['commands'] == []
+    assert backend.requests == [('run', 'stack the blocks'), ('stop',), ('approve', 'cmd-1', True)]
+    assert [r['text'] for r in refusals] == ['a command is text of at most 2000 characters',
+                                             "unknown request 'launch'"]
+
+
+def test_a_camera_stream_sends_jpeg_frames_while_watched_and_lets_go_after(served):
+    backend, server = served
+    assert _get(server, '/stream/cap/sim/cameras/nowhere/color')[0] == 404
+    connection = http.client.HTTPConnection('127.0.0.1', server.port, timeout=10)
+    connection.request('GET', '/stream' + MemoryBackend.TOPIC)
+    response = connection.getresponse()
+    assert response.getheader('Content-Type') == 'multipart/x-mixed-replace; boundary=cap-frame'
+    assert backend.channel.viewers == 1
+    backend.channel.put(_rgb())
+    assert response.readline() == b'--cap-frame\r\n'
+    headers = {}
+    while (line := response.readline()) != b'\r\n':
+        name, _, value = line.decode().partition(':')
+        headers[name] = value.strip()
+    assert headers['Content-Type'] == 'image/jpeg' and headers['X-Stamp'] == '1.500000'
+    jpeg = response.read(int(headers['Content-Length']))
+    assert cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR).shape == (48, 64, 3)
+    backend.channel.put(RawImage('yuv422', 4, 4, 8, bytes(32)))  # one it cannot show: the page is told, once
+    assert _wait(lambda: [n['text'] for n in backend.state.snapshot()['notices']] == [
+        f"{MemoryBackend.TOPIC}: cannot show images encoded 'yuv422'"])
+    connection.close()
+    backend.channel.put(_rgb())  # the next write finds the browser gone
+    assert backend.unwatched.wait(10.0) and backend.channel.viewers == 0
+
+
+def _wait(predicate, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not predicate():
+        time.sleep(0.01)
+    return predicate()

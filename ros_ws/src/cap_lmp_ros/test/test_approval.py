@@ -1,0 +1,181 @@
+"""Approval before a program runs (cap_lmp/approval.py): a plan-only run lists what the program would do, nothing
+moves until the gate says yes, and a rejection, a cancel or a failed plan leaves the table and the session as they
+were. In this process and across the sandbox process, against a real OpenAI-protocol server on 127.0.0.1."""
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from cap_lmp.approval import PlannedCall, plain, planned_call
+from cap_lmp.engine import CODE, EXECUTING
+from cap_lmp.errors import NotApproved
+from cap_lmp.isolated_engine import IsolatedEngine
+from cap_lmp.llm import OpenAICompatibleClient
+from cap_lmp.outcome import Outcome
+from cap_lmp.sandbox import SandboxLimits
+from cap_lmp.testing.openai_server import ScriptedOpenAIServer
+from cap_lmp_ros.domains.tabletop.lmps import build_engine
+from cap_lmp_ros.testing.table import Table
+
+SCENE = {'red block': (-0.1, -0.4), 'blue block': (0.1, -0.45), 'red bowl': (-0.15, -0.65),
+         'blue bowl': (0.15, -0.3)}
+PROGRAMS = {
+    'put the blocks in the bowls of their colour': (
+        "names = parse_obj_name('the blocks', f'objects = {get_obj_names()}')\n"
+        "for name in names:\n"
+        "    put_first_on_second(name, name.replace('block', 'bowl'))\n"
+        "say('done sorting')\n"
+        "sorted_count = len(names)"),
+    '# the blocks.': "ret_val = [name for name in objects if 'block' in name]",
+    'move the red block to the middle': "put_first_on_second('red block', denormalize_xy([0.5, 0.5]))",
+    'move the purple block': "put_first_on_second('red block', 'red bowl')\nget_obj_pos('purple block')",
+    'dance forever': "while True:\n    put_first_on_second('red block', 'red bowl')",
+}
+PLAN_FUNCTIONS = ('put_first_on_second', 'say')
+
+
+@pytest.fixture
+def server():
+    with ScriptedOpenAIServer(PROGRAMS) as scripted:
+        yield scripted
+
+
+@pytest.fixture
+def table() -> Table:
+    return Table.with_objects(SCENE)
+
+
+class Gate:
+    """An approval gate that records what it was shown and what the table looked like then, and answers as told."""
+
+    def __init__(self, table: Table, answer: str = 'approve') -> None:
+        self.table, self.answer = table, answer
+        self.shown: list[tuple[str, list[PlannedCall]]] = []
+        self.moves_when_asked: list[int] = []
+        self.asked = threading.Event()
+        self.release = threading.Event()
+
+    def __call__(self, code: str, plan: list[PlannedCall]) -> None:
+        self.shown.append((code, plan))
+        self.moves_when_asked.append(len(self.table.moves))
+        self.asked.set()
+        if self.answer == 'wait':
+            self.release.wait(10.0)
+            return
+        if self.answer == 'reject':
+            raise NotApproved('rejected by the operator: not that one; nothing ran', 'rejected')
+
+
+def _engine(server: ScriptedOpenAIServer, table: Table, isolated: bool):
+    client = OpenAICompatibleClient(server.base_url, 'scripted-model', timeout_s=10.0)
+    options = {'plan_functions': list(PLAN_FUNCTIONS)}
+    if isolated:
+        return IsolatedEngine(build_engine, table.api(), client, SandboxLimits(time_limit_s=5.0),
+                              engine_options=options, address_space_extra_bytes=400 << 20)
+    return build_engine(table.api(), client, SandboxLimits(time_limit_s=5.0), **options)
+
+
+@pytest.fixture(params=['in process', 'sandbox process'])
+def engine(request, server, table):
+    built = _engine(server, table, request.param == 'sandbox process')
+    yield built
+    built.close()
+
+
+def test_an_approved_program_runs_what_its_plan_showed_after_the_gate(engine, server, table):
+    gate = Gate(table)
+    engine.approval = gate
+    events = []
+    engine.add_listener(events.append)
+    result = engine.run('put the blocks in the bowls of their colour')
+    assert result.success, result.message
+    code, plan = gate.shown[0]
+    assert code == result.code and 'put_first_on_second' in code
+    assert [(call.function, call.args) for call in plan] == [
+        ('put_first_on_second', ('red block', 'red bowl')), ('put_first_on_second', ('blue block', 'blue bowl')),
+        ('say', ('done sorting',))]
+    assert gate.moves_when_asked == [0]  # nothing moved before the approval
+    assert table.moves == [('red block', 'red bowl'), ('blue block', 'blue bowl')]
+    assert table.said == ['done sorting']  # said once, when it ran, not while it was planned
+    nested = [r for r in server.requests if r.prompt.rstrip().endswith('# the blocks.')]
+    assert len(nested) == 1  # the nested LMP's planned answer is the one that ran
+    stages = [event.stage for event in events if event.lmp == 'tabletop_ui']
+    assert stages.index(CODE) < stages.index(EXECUTING)
+
+
+def test_a_rejected_program_moves_nothing_and_leaves_the_session_as_it_was(engine, table):
+    engine.approval = Gate(table, 'reject')
+    result = engine.run('put the blocks in the bowls of their colour')
+    assert result.outcome is Outcome.REFUSED and not result.success
+    assert 'rejected by the operator: not that one' in result.message
+    assert table.moves == [] and table.said == []
+    engine.approval = None
+    after = engine.run('say sorted_count')  # the plan-only run bound it in a copy of the scope only
+    assert not after.success and 'sorted_count' in after.message
+
+
+def test_a_failing_plan_is_reported_before_anything_moves(engine, table):
+    gate = Gate(table)
+    engine.approval = gate
+    result = engine.run('move the purple block')
+    assert result.outcome is Outcome.ERROR
+    assert 'the plan-only run failed, so nothing moved' in result.message and 'purple block' in result.message
+    assert gate.shown == [] and table.moves == []
+
+
+def test_a_point_target_is_planned_as_plain_numbers(engine, table):
+    gate = Gate(table)
+    engine.approval = gate
+    assert engine.run('move the red block to the middle').success
+    (call,) = gate.shown[0][1]
+    assert call.args[0] == 'red block' and np.allclose(call.args[1], [0.0, -0.5])
+    assert all(isinstance(value, float) for value in call.args[1])
+
+
+def test_a_cancel_while_waiting_for_approval_cancels_the_command(engine, table):
+    gate = Gate(table, 'wait')
+    engine.approval = gate
+    box = {}
+    worker = threading.Thread(target=lambda: box.update(result=engine.run('move the red block to the middle')))
+    worker.start()
+    assert gate.asked.wait(10.0)
+    engine.cancel()
+    gate.release.set()  # a gate that says yes after the cancel (too late): the program still does not run
+    worker.join(10.0)
+    assert box['result'].outcome is Outcome.CANCELLED and table.moves == []
+
+
+def test_a_program_with_too_many_actions_is_not_planned(engine, table):
+    engine.approval = Gate(table)
+    result = engine.run('dance forever')
+    assert not result.success and 'more than 200 robot actions' in result.message and table.moves == []
+
+
+def test_plain_values_and_the_wire_form_of_a_planned_call():
+    assert plain(np.array([0.1, 0.2])) == [0.1, 0.2]
+    assert plain(np.float32(0.5)) == 0.5 and plain(float('nan')) == 'nan' and plain(object()) == '<object>'
+    assert plain('x' * 1000) == 'x' * 500 and len(plain(list(range(1000)))) == 100
+    call = PlannedCall('put_first_on_second', ('red block', [0.0, -0.5]))
+    assert planned_call(call.to_wire()) == call
+    for bad in ({'function': 'os.system'}, {'function': 'f', 'args': 'x'}, ['f'], {'function': 3}):
+        with pytest.raises(ValueError):
+            planned_call(bad)
+
+
+def test_the_table_top_says_what_each_planned_call_does():
+    from cap_lmp_ros.domains.tabletop.plan import describe_call
+    from cap_lmp_ros.plan_steps import plan_summary
+
+    named = describe_call(PlannedCall('put_first_on_second', (['the Red block'], 'blue bowl')))
+    assert (named.object_name, named.target_name, named.description) == (
+        'red block', 'blue bowl', 'put the red block on the blue bowl')
+    point = describe_call(PlannedCall('put_first_on_second', ('red block',), {'target': [0.1, -0.5]}))
+    assert point.points == ((0.1, -0.5, 0.0),) and point.description == 'put the red block at (0.100, -0.500)'
+    odd = describe_call(PlannedCall('put_first_on_second', ('red block', '<object>')))
+    assert odd.target_name == '<object>'  # text the program passed is kept as text (the page shows it as text)
+    assert describe_call(PlannedCall('wave', (3,))).description == 'wave(3)'
+    assert plan_summary([named, point]) == ('1. put the red block on the blue bowl; '
+                                            '2. put the red block at (0.100, -0.500)')
+    assert plan_summary([]) == 'the plan-only run found no robot action'
