@@ -223,10 +223,10 @@ def test_up_with_a_missing_local_model_says_how_to_install_it_in_one_line(ros_is
 def test_bench_help_usage_and_domain_ids(ros_isolation, tmp_path):
     shown = _cap('bench', '--help')
     assert shown.returncode == 0, shown.stderr
-    assert 'usage: cap bench tabletop' in shown.stdout
+    assert 'usage: cap bench NAME' in shown.stdout and 'cap bench whiteboard' in shown.stdout
     bare = _cap('bench')
     assert bare.returncode == 2
-    assert 'usage: cap bench tabletop' in bare.stderr and 'Traceback' not in bare.stderr
+    assert 'usage: cap bench NAME' in bare.stderr and 'Traceback' not in bare.stderr
     # The run's graphs use the environment's ROS_DOMAIN_ID (job i: ROS_DOMAIN_ID + i); too many jobs are refused.
     empty = _cap('bench', 'tabletop', '--trials', '0', '--out', str(tmp_path))
     assert empty.returncode == 0, empty.stderr

@@ -10,7 +10,7 @@
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
     cap urdf > ur5e_gripper.urdf                     the robot's URDF, as /robot_description carries it
     cap demo [whiteboard]                            the table-top demo (cap_bringup/demo.py), or the whiteboard one
-    cap bench tabletop --trials 1                    the paper's table-top benchmark (see cap_bench/runner.py)
+    cap bench tabletop --trials 1                    the paper's table-top benchmark (cap bench: the others)
 
 Every command takes --namespace (the graph's names are relative; `cap send --namespace robot1 "..."` talks to the
 graph brought up with `cap up --namespace robot1`). Uses the ROS_DOMAIN_ID of the environment; discovery stays on
@@ -524,12 +524,16 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
         context.try_shutdown()
 
 
-BENCH_USAGE = """usage: cap bench tabletop [options]   (options: cap bench tabletop --help)
-       cap bench codegen | humaneval | reasoning [options]
+BENCH_USAGE = """usage: cap bench NAME [options]   (options: cap bench NAME --help)
+       NAME: tabletop | devset | whiteboard | controllers | codegen | humaneval | reasoning
 
 The paper's simulated table-top benchmark through the cap-ros graph, e.g.
     cap bench tabletop --trials 1                   one episode of every row with the reference programs
     cap bench tabletop --policy llm --jobs 2        programs from CAP_LLM_BASE_URL / CAP_LLM_MODEL, two graphs
+    cap bench devset --policy llm --backend local   the table-top development set with the local model
+The other domains through their graphs, e.g.
+    cap bench whiteboard --trials 20                drawing and erasing, judged on the ink
+    cap bench controllers --trials 5                generated controllers: balance, push, track
 The paper's language-side tables through the engine and the sandbox process (no graph), e.g.
     cap bench codegen                               robot code generation, flat and hierarchical (oracle)
     cap bench humaneval --policy llm --jobs 2       HumanEval with the model at CAP_LLM_BASE_URL
