@@ -178,15 +178,20 @@ class PickPlaceConfig:
 
     workspace: Workspace = Workspace()
     tool_offset: float = parameter(DEFAULT_TOOL_OFFSET, 'Tool centre point along the flange z axis [m].')
-    travel_height: float = parameter(0.25, 'Lowest tool height while carrying or approaching [m].')
+    travel_height: float = parameter(0.12, 'Lowest tool height while carrying or approaching [m].')
     travel_clearance: float = parameter(0.05, 'Gap kept under a carried object over the tallest other object [m].')
     grasp_height_fraction: float = parameter(0.5, 'Grasp point: this fraction of the object\'s height above its '
                                              'bottom.')
     gripper_open_width: float = parameter(0.085, 'Opening of the open gripper [m].')
     gripper_side_room: float = parameter(0.01, 'Room needed on either side of an object to close around it [m].')
+    approach_side_room: float = parameter(0.015, 'Opening on the approach: the object\'s width plus this on each '
+                                          'side (a shorter close than from fully open) [m].')
     # A fully opened gripper could push a bowl's wall.
     release_side_room: float = parameter(0.01, 'Opening on release: the object\'s width plus this on each side [m].')
     grip_force: float = parameter(20.0, 'Grip force per finger when grasping [N].')
+    # Commanded that far inside the object, the fingers' servo squeezes with its full force limit, and the command
+    # ends soon after the fingers stop on the object (a close to zero would run on for the whole width).
+    grasp_squeeze: float = parameter(0.015, 'A grasp commands an opening this much narrower than the object [m].')
     grasp_width_tolerance: float = parameter(0.012, 'A grasp is verified when the fingers stop within this of the '
                                              'object\'s width [m].')
     require_stalled: bool = parameter(True, 'A grasp counts only if the fingers stalled on the object.')
@@ -203,7 +208,7 @@ class PickPlaceConfig:
     # 0.12 left far targets on the centre line hidden by the forearm.
     clear_view_distance: float = parameter(0.20, 'How far sideways the tool moves after placing to clear the '
                                            'camera\'s view (with clear_view) [m].')
-    contact_tolerance: float = parameter(0.002, 'Joint tracking error read as contact while placing [rad] (sent as '
+    contact_tolerance: float = parameter(0.001, 'Joint tracking error read as contact while placing [rad] (sent as '
                                          'the path tolerance of the place descent).')
     # After retreating, an object placed on a target object farther than this was dropped on the way.
     place_tolerance: float = parameter(0.08, 'Largest xy distance of the placed object from the target object [m] '
@@ -224,6 +229,11 @@ class PickPlaceConfig:
                                    'straight line is used instead [m].')
     joint_limits: JointLimits = UR5E_LIMITS
     cartesian_limits: CartesianLimits = CartesianLimits()
+    # The last centimetres of a place are slow: at full acceleration the servos lag the reference by more than
+    # the contact tolerance, which would read as a touch-down in mid-air.
+    touchdown_limits: CartesianLimits = CartesianLimits(speed=0.1, acceleration=0.8, jerk=8.0)
+    touchdown_height: float = parameter(0.015, 'The place descent slows down (touchdown_limits) this far above the '
+                                        'expected contact [m].')
     # The robot's controller and the unit tests run on the same points.
     trajectory_period: float = parameter(DEFAULT_PERIOD, 'Time between trajectory points sent to the controller '
                                          '[s].')
@@ -241,14 +251,20 @@ class TrajectoryStep:
     goal_pose: np.ndarray
     stop_on_contact: bool = False
     contact_tolerance: float = 0.0
+    limits: CartesianLimits | None = None  # a straight line's limits; None: the config's cartesian_limits
 
 
 @dataclass
 class GripperStep:
-    """Command the gripper opening [m] with at most `max_effort` [N] (0 = the gripper's default)."""
+    """Command the gripper opening [m] with at most `max_effort` [N] (0 = the gripper's default).
+
+    With `unless_open_at_least` [m], the step is skipped when the fingers are already open that wide (an approach
+    after a release needs no gripper motion of its own).
+    """
 
     position: float
     max_effort: float = 0.0
+    unless_open_at_least: float | None = None
 
 
 Step = Union[TrajectoryStep, GripperStep]
@@ -389,8 +405,9 @@ class PickPlacePlan:
             return step.trajectory
         try:
             if step.cartesian:
-                return cartesian_line(actual, step.goal_pose, self.config.joint_limits, self.config.cartesian_limits,
-                                      self.config.trajectory_period, self.config.tool_offset)
+                return cartesian_line(actual, step.goal_pose, self.config.joint_limits,
+                                      step.limits or self.config.cartesian_limits, self.config.trajectory_period,
+                                      self.config.tool_offset)
             return time_joint_path([actual, step.goal_joints], self.config.joint_limits,
                                    self.config.trajectory_period)
         except (IKError, TrajectoryError) as error:
@@ -437,17 +454,19 @@ class _Planner:
         self.joints = trajectory.end
         return TrajectoryStep(trajectory, False, goal, top_down_pose(xyz, yaw))
 
-    def line(self, xyz: Sequence[float], yaw: float, what: str, stop_on_contact: bool = False) -> TrajectoryStep:
+    def line(self, xyz: Sequence[float], yaw: float, what: str, stop_on_contact: bool = False,
+             limits: CartesianLimits | None = None) -> TrajectoryStep:
         pose = top_down_pose(xyz, yaw)
         try:
-            trajectory = cartesian_line(self.joints, pose, self.config.joint_limits, self.config.cartesian_limits,
-                                        self.config.trajectory_period, self.config.tool_offset)
+            trajectory = cartesian_line(self.joints, pose, self.config.joint_limits,
+                                        limits or self.config.cartesian_limits, self.config.trajectory_period,
+                                        self.config.tool_offset)
         except (IKError, TrajectoryError) as error:
             raise PickPlaceError(PickPlaceErrorCode.IK_FAILED,
                                  f'cannot move straight to {what} at {np.round(xyz, 3).tolist()}: {error}')
         self.joints = trajectory.end
         return TrajectoryStep(trajectory, True, trajectory.end, pose, stop_on_contact,
-                              self.config.contact_tolerance if stop_on_contact else 0.0)
+                              self.config.contact_tolerance if stop_on_contact else 0.0, limits)
 
     def travel(self, xyz: Sequence[float], yaw: float, what: str, lowest_allowed_z: float) -> TrajectoryStep:
         """A joint-space move at travel height, or a straight line if the joint move would sag too low."""
@@ -716,7 +735,9 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     place_point = (place_xy[0], place_xy[1], place_z)
 
     # Approach: rise straight up first if the gripper is low (it may be among objects), then move above the object.
-    approach_steps: list[Step] = [GripperStep(config.gripper_open_width)]
+    approach_steps: list[Step] = [GripperStep(min(config.gripper_open_width,
+                                                  grasp_width + 2 * config.approach_side_room),
+                                              unless_open_at_least=grasp_width + 2 * config.gripper_side_room)]
     start_tcp = forward_kinematics(planner.joints, config.tool_offset)
     if start_tcp[2, 3] < lowest_travel_z and start_tcp[2, 2] < -0.99:
         start_yaw = math.atan2(start_tcp[1, 0], start_tcp[0, 0])
@@ -739,7 +760,11 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     place_yaw = _roomiest_yaw(planner, place_point, yaws, [other for other in neighbours if other.name not in below],
                               release_width / 2 + config.finger_thickness, config, target_description)
     move = planner.travel(above_target, place_yaw, f'above {target_description}', lowest_travel_z)
-    place = planner.line(place_point, place_yaw, target_description, stop_on_contact=True)
+    # Down fast to just above the expected contact, then slowly, stopping at a touch-down.
+    place = [planner.line((place_xy[0], place_xy[1], place_z + config.touchdown_height), place_yaw,
+                          target_description),
+             planner.line(place_point, place_yaw, target_description, stop_on_contact=True,
+                          limits=config.touchdown_limits)]
     retreat = [planner.line(above_target, place_yaw, f'above {target_description}')]
     if config.clear_view_from is not None:
         clear = _clear_view_step(planner, place_xy, travel_z, place_yaw, config)
@@ -750,13 +775,13 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     stages = [
         Stage(StageName.APPROACH, approach_steps, failure_code=PickPlaceErrorCode.IK_FAILED),
         Stage(StageName.DESCEND, [descend], failure_code=PickPlaceErrorCode.IK_FAILED),
-        Stage(StageName.GRASP, [GripperStep(0.0, config.grip_force)]),
+        Stage(StageName.GRASP, [GripperStep(max(grasp_width - config.grasp_squeeze, 0.0), config.grip_force)]),
         Stage(StageName.VERIFY, [], [GraspCheck(max(grasp_width - tolerance, 0.002), grasp_width + tolerance,
                                                 config.require_stalled)], PickPlaceErrorCode.GRASP_MISSED),
         Stage(StageName.LIFT, [lift], [LiftCheck(obj.name, max(grasp_width - tolerance, 0.002))],
               PickPlaceErrorCode.OBJECT_DROPPED),
         Stage(StageName.MOVE, [move], failure_code=PickPlaceErrorCode.IK_FAILED),
-        Stage(StageName.PLACE, [place], failure_code=PickPlaceErrorCode.IK_FAILED),
+        Stage(StageName.PLACE, place, failure_code=PickPlaceErrorCode.IK_FAILED),
         Stage(StageName.RELEASE, [GripperStep(release_width)]),
         Stage(StageName.RETREAT, retreat, [PlacedCheck(
             obj.name, target_xy, config.place_tolerance if target_object else config.point_place_tolerance,

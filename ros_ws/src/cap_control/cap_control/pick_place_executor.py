@@ -237,6 +237,10 @@ class _Run(GoalRun):
         raise Failed(PickPlaceErrorCode.UNKNOWN, f'the arm did not complete its motion: {outcome.message}')
 
     def grip(self, step: GripperStep, observation: Observation) -> None:
+        if step.unless_open_at_least is not None:
+            opening = self.arm.opening()
+            if opening is not None and opening >= step.unless_open_at_least:
+                return
         self.available(self.gripper.server_ready(), self.gripper.server_description)
         goal = self.gripper.command(step.position, step.max_effort)
         self.send(goal, 'the gripper', 'the gripper refused the command')

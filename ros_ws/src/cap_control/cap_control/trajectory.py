@@ -50,9 +50,9 @@ class JointLimits:
 
 
 UR5E_LIMITS = JointLimits(
-    velocity=np.full(6, math.pi),
-    acceleration=np.full(6, 3.0),
-    jerk=np.full(6, 30.0),
+    velocity=np.array([math.pi, math.pi, math.pi, 2 * math.pi, 2 * math.pi, 2 * math.pi]),
+    acceleration=np.array([12.0, 12.0, 12.0, 24.0, 24.0, 24.0]),
+    jerk=np.array([150.0, 150.0, 150.0, 300.0, 300.0, 300.0]),
 )
 
 
@@ -60,9 +60,9 @@ UR5E_LIMITS = JointLimits(
 class CartesianLimits:
     """Limits of the TCP along a straight line: linear [m/s, m/s^2, m/s^3] and angular speed [rad/s]."""
 
-    speed: float = parameter(0.25, 'Tool speed on straight descents and lifts [m/s].')
-    acceleration: float = parameter(1.0, 'Tool acceleration on straight lines [m/s^2].')
-    jerk: float = parameter(10.0, 'Tool jerk on straight lines [m/s^3].')
+    speed: float = parameter(0.5, 'Tool speed on straight descents and lifts [m/s].')
+    acceleration: float = parameter(6.0, 'Tool acceleration on straight lines [m/s^2].')
+    jerk: float = parameter(80.0, 'Tool jerk on straight lines [m/s^3].')
     angular_speed: float = parameter(1.0, 'Tool turning speed on straight lines [rad/s].')
 
 
@@ -178,7 +178,13 @@ def _time_path_parameter(period: float, speed: float, acceleration: float, jerk:
     request.max_acceleration = [acceleration]
     request.max_jerk = [jerk]
     timed = ruckig.Trajectory(1)
-    result = generator.calculate(request, timed)
+    try:
+        result = generator.calculate(request, timed)
+    except ruckig.RuckigError:
+        # Ruckig 0.19 fails on the boundary case where full acceleration is reached exactly at full speed
+        # (acceleration^2 / jerk == speed); one percent less jerk steps off it.
+        request.max_jerk = [jerk * 0.99]
+        result = generator.calculate(request, timed)
     if result not in (ruckig.Result.Working, ruckig.Result.Finished):
         raise TrajectoryError(f'Ruckig could not time the Cartesian line: {result}')
     times = _sample_times(timed.duration, period)

@@ -127,7 +127,7 @@ class FakeWorld(Arm, Gripper, Perception):
     def command(self, position: float, max_effort: float) -> PendingGoal:
         self.gripper_commands.append((position, max_effort))
         tcp = forward_kinematics(self.q)[:3, 3]
-        if position < 0.01:  # closing
+        if max_effort > 0:  # closing on an object (a grasp is the only command with a grip force)
             under = [o for o in self.objects.values() if o.category == 'block'
                      and math.dist(o.position[:2], tcp[:2]) < 0.01] if not self.missing_object else []
             if under:
@@ -201,8 +201,21 @@ def test_a_block_goes_into_the_bowl_through_every_stage(table):
     # force and releases wider than the block.
     assert [(stage, tolerance) for stage, _, tolerance in world.trajectories if tolerance is not None] == \
         [(StageName.PLACE, PickPlaceConfig().contact_tolerance)]
-    assert world.gripper_commands[1] == (0.0, PickPlaceConfig().grip_force)
-    assert BLOCK[1] < world.gripper_commands[2][0] <= PickPlaceConfig().gripper_open_width
+    # The fingers start fully open: the approach needs no gripper motion, the first command is the grasp.
+    assert world.gripper_commands[0] == pytest.approx((BLOCK[1] - PickPlaceConfig().grasp_squeeze,
+                                                       PickPlaceConfig().grip_force))
+    assert BLOCK[1] < world.gripper_commands[1][0] <= PickPlaceConfig().gripper_open_width
+    assert len(world.gripper_commands) == 2
+
+
+def test_fingers_too_close_together_open_on_the_approach(table):
+    world, executor, stages = table
+    world.opening_now = 0.02
+    outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
+    assert outcome.code == PickPlaceErrorCode.NONE, outcome.message
+    approach_opening, grasp = world.gripper_commands[:2]
+    assert approach_opening[0] >= BLOCK[1] + 2 * PickPlaceConfig().gripper_side_room
+    assert grasp == pytest.approx((BLOCK[1] - PickPlaceConfig().grasp_squeeze, PickPlaceConfig().grip_force))
 
 
 def test_a_grasp_that_closes_on_nothing_fails_before_lifting(table):
@@ -291,7 +304,7 @@ def test_contact_on_the_place_descent_ends_it_and_the_retreat_starts_where_the_a
     world.contact_at_place = True
     outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
     assert outcome.code == PickPlaceErrorCode.NONE, outcome.message
-    place = [t for stage, t, _ in world.trajectories if stage == StageName.PLACE][0]
+    place = [t for stage, t, _ in world.trajectories if stage == StageName.PLACE][-1]  # the touch-down
     retreat = [t for stage, t, _ in world.trajectories if stage == StageName.RETREAT][0]
     np.testing.assert_allclose(retreat.start, place.positions[len(place) // 2])
 

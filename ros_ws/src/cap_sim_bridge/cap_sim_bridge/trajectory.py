@@ -62,6 +62,19 @@ class JointTrajectory:
         return position, velocity
 
 
+    def sample_acceleration(self, t: float) -> np.ndarray:
+        """The reference acceleration at time t (the second derivative of the segment's spline; zero outside)."""
+        times = self.times
+        if t <= times[0] or t >= times[-1]:
+            return np.zeros(self.positions.shape[1])
+        i = int(np.searchsorted(times, t, side='right')) - 1
+        duration = times[i + 1] - times[i]
+        s = (t - times[i]) / duration
+        p0, p1 = self.positions[i], self.positions[i + 1]
+        v0, v1 = self.velocities[i] * duration, self.velocities[i + 1] * duration
+        return ((12 * s - 6) * p0 + (6 * s - 4) * v0 + (6 - 12 * s) * p1 + (6 * s - 2) * v1) / (duration * duration)
+
+
 def _estimated_velocities(times: np.ndarray, positions: np.ndarray) -> np.ndarray:
     velocities = np.zeros_like(positions)
     if len(times) > 2:

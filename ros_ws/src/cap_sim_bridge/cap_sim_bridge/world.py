@@ -50,7 +50,8 @@ HOME_JOINT_POSITIONS = np.array([0.8413, -2.2842, 1.7017, -0.9883, -1.5708, -0.7
 GRIPPER_MAX_OPENING = scenes.GRIPPER_MAX_OPENING  # [m], pad to pad
 GRIPPER_DEFAULT_FORCE = 20.0  # [N] per finger
 GRIPPER_MAX_FORCE = 100.0
-GRIPPER_SPEED = 0.1  # [m/s] rate at which the commanded opening moves, like a real gripper's finger speed
+# [m/s] rate at which the commanded opening moves: the Robotiq 2F-85's highest finger speed (20-150 mm/s).
+GRIPPER_SPEED = 0.15
 
 DEFAULT_SETTLE_TIME = 0.5  # [s] of simulated time for objects to come to rest after reset
 
@@ -169,7 +170,8 @@ class TabletopWorld:
         self._arm_qpos_adr = model.jnt_qposadr[self._arm_joint_ids]
         self._arm_dof_adr = model.jnt_dofadr[self._arm_joint_ids]
         self._arm_actuator_ids = np.array([model.actuator(n.replace('_joint', '')).id for n in ARM_JOINT_NAMES])
-        # Velocity feed-forward through the position servo: ctrl = q_ref + (kv / kp) * qdot_ref.
+        # Velocity feed-forward through the position servo: ctrl = q_ref + (kv / kp) * qdot_ref (and the inertia's
+        # torques / kp: _inertia_feedforward).
         bias = model.actuator_biasprm[self._arm_actuator_ids]
         self._arm_feedforward = bias[:, 2] / bias[:, 1]
         # The servos' parameters, restored when torque control ends (set_arm_torque_mode).
@@ -258,8 +260,10 @@ class TabletopWorld:
     def _update_references(self) -> None:
         data = self.data
         if self._trajectory is not None:
-            q_ref, qd_ref = self._trajectory.sample(data.time + self.model.opt.timestep)
-            data.ctrl[self._arm_actuator_ids] = q_ref + self._arm_feedforward * qd_ref
+            t = data.time + self.model.opt.timestep
+            q_ref, qd_ref = self._trajectory.sample(t)
+            data.ctrl[self._arm_actuator_ids] = q_ref + self._arm_feedforward * qd_ref + \
+                self._inertia_feedforward(self._trajectory.sample_acceleration(t))
             if data.time >= self._trajectory.end_time:
                 self._hold_positions = self._trajectory.final_positions
                 self._trajectory = None
@@ -270,6 +274,17 @@ class TabletopWorld:
             self._gripper_reference = self._gripper_target if abs(delta) <= step else \
                 self._gripper_reference + np.sign(delta) * step
             data.ctrl[self._gripper_actuator_id] = self._gripper_reference
+
+    def _inertia_feedforward(self, accelerations: np.ndarray) -> np.ndarray:
+        """The servos' ctrl offset that adds the torques M(q) qdd_ref of the reference's accelerations (as an arm
+        controller's model-based feed-forward does), so the arm does not lag its reference while it accelerates:
+        that lag would read as contact. The servos' force range still bounds the sum."""
+        model, data = self.model, self.data
+        wanted = np.zeros(model.nv)
+        wanted[self._arm_dof_adr] = accelerations
+        torques = np.zeros(model.nv)
+        mujoco.mj_mulM(model, data, torques, wanted)
+        return torques[self._arm_dof_adr] / self._arm_servo_gain[:, 0]
 
     # ------------------------------------------------------------------------------------------------- arm
     def joint_positions(self) -> np.ndarray:
@@ -490,6 +505,9 @@ class TabletopWorld:
         """
         with self.lock:
             self._gripper_target = float(np.clip(opening, 0.0, GRIPPER_MAX_OPENING))
+            # The ramp starts where the fingers are, as a real gripper's does: after a grasp the reference has run
+            # on to the closed end, and a release ramping back from there would stand still for a while.
+            self._gripper_reference = float(self.data.ten_length[self._gripper_tendon_id])
             force = GRIPPER_DEFAULT_FORCE if max_force <= 0 else min(float(max_force), GRIPPER_MAX_FORCE)
             self._set_gripper_force(force)
 
