@@ -233,6 +233,40 @@ def test_cancel_stops_the_arm_and_bad_goals_are_refused_with_a_reason(graph, spi
     assert not response.success and 'violet' in response.message
 
 
+def test_a_camera_is_rendered_only_while_somebody_watches_it(ros_context, spin_until):
+    """Rendering costs the physics thread more than the physics: no subscriber, no rendering; a colour subscriber
+    to one camera gets frames of that camera, and depth is not rendered for it."""
+    bridge = SimBridgeNode(context=ros_context, parameter_overrides=[
+        Parameter('real_time', value=False), Parameter('image_width', value=WIDTH),
+        Parameter('image_height', value=HEIGHT), Parameter('camera_rate', value=10.0)])
+    rendered = []
+    render = bridge.world.render
+
+    def counted_render(camera, *args, **kwargs):  # the real renderer, counted
+        rendered.append((camera, kwargs.get('with_depth')))
+        return render(camera, *args, **kwargs)
+
+    bridge.world.render = counted_render
+    node = Node('camera_watcher', context=ros_context)
+    executor = MultiThreadedExecutor(num_threads=4, context=ros_context)
+    executor.add_node(bridge)
+    executor.add_node(node)
+    try:
+        start = bridge.world.time
+        assert spin_until(executor, lambda: bridge.world.time > start + 2.0, timeout=WAIT)
+        assert rendered == [], 'cameras rendered with nobody watching'
+        frames = []
+        camera = CAMERA_NAMES[0]
+        node.create_subscription(Image, f'{GraphNames.CAMERA_NAMESPACE}/{camera}/color', frames.append,
+                                 qos_profile_sensor_data)
+        assert spin_until(executor, lambda: len(frames) >= 3, timeout=WAIT)
+        assert set(rendered) == {(camera, False)}
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        bridge.destroy_node()
+
+
 def test_installed_entry_point_runs_as_fast_as_possible_with_the_packaged_parameter_file(ros_context, spin_until,
                                                                                          tmp_path):
     executable = ROOT / 'ros_ws' / 'install' / 'cap_sim_bridge' / 'lib' / 'cap_sim_bridge' / 'sim_bridge'

@@ -3,7 +3,8 @@ driver and the cameras.
 
 Publishes /clock (simulated time), /joint_states (the arm, the fingers and the scene's own joints: a cart-pole's, the
 whiteboard tool's sprung slides), the ground-truth object array, per camera <CAMERA_NAMESPACE>/<camera>/{color,
-depth, camera_info, pose}, and in a scene with a whiteboard its ink (SIM_INK_TOPIC when it changes, at most
+depth, camera_info, pose} (a camera is rendered only while somebody subscribes to its colour or depth images, and
+depth only for a depth subscriber), and in a scene with a whiteboard its ink (SIM_INK_TOPIC when it changes, at most
 `ink_rate` times a second of simulated time, and a PNG from SIM_GET_INK_SERVICE); serves the scene reset, a
 FollowJointTrajectory action and a GripperCommand action; for controllers, lockstep stepping of a plant
 (ControlStep, lockstep.py) and pushes on the tool (PushTool). Like a robot driver it does not listen to /cap/stop:
@@ -164,7 +165,8 @@ class SimBridgeNode(Node):
         next_objects = next_camera = next_ink = world.time
         ink_version = -1  # the ink version last published
         last_state_wall = last_objects_wall = -math.inf
-        idle_frames: list[tuple[Any, ...]] | None = None  # the camera messages rendered when idling began
+        # The cameras watched and their messages rendered when idling began (or when the watched ones changed).
+        idle_frames: tuple[tuple[tuple[str, bool], ...], list[tuple[Any, ...]]] | None = None
         try:
             while not self._stop.is_set():
                 if self.lockstep.active:  # a controller steps the world; a silent one loses it, made safe
@@ -205,11 +207,13 @@ class SimBridgeNode(Node):
                 if not idle:
                     idle_frames = None
                 if camera_rate > 0 and self._camera_rate > 0 and self._cameras and now >= next_camera:
+                    watched = self._watched_cameras()
                     if idle:  # nothing in view moves: render once, then send that frame with new stamps
-                        idle_frames = idle_frames or self._render_frames(now)
-                        self._send_frames(idle_frames, now)
-                    else:
-                        self._send_frames(self._render_frames(now), now)
+                        if idle_frames is None or idle_frames[0] != watched:
+                            idle_frames = (watched, self._render_frames(now, watched))
+                        self._send_frames(idle_frames[1], now)
+                    elif watched:
+                        self._send_frames(self._render_frames(now, watched), now)
                     next_camera = max(next_camera + 1.0 / camera_rate, now)
                 if self._scene_reset.is_set():
                     # A reset simulates the settling at once: pace from here rather than wait for the wall clock.
@@ -291,13 +295,28 @@ class SimBridgeNode(Node):
                            f'for {request.duration:g} s'
         return response
 
-    def _render_frames(self, now: float) -> list[tuple[Any, ...]]:
-        """(publishers, colour, depth or None, camera_info) of every camera, rendered now."""
+    def _watched_cameras(self) -> tuple[tuple[str, bool], ...]:
+        """(camera, with depth) of every camera somebody subscribes to.
+
+        Rendering costs the physics thread more than the physics (an RGB-D frame is several steps' time): a camera
+        nobody watches is not rendered, and depth only for a depth subscriber.
+        """
+        watched = []
+        for camera in self._cameras:
+            publishers = self._camera_pubs[camera]
+            depth = self._publish_depth and publishers['depth'].get_subscription_count() > 0
+            if depth or publishers['color'].get_subscription_count() > 0:
+                watched.append((camera, depth))
+        return tuple(watched)
+
+    def _render_frames(self, now: float, watched: tuple[tuple[str, bool], ...]) -> list[tuple[Any, ...]]:
+        """(publishers, colour, depth or None, camera_info) of the `watched` cameras, rendered now."""
         width, height = self._image_width, self._image_height
         frames = []
-        for camera in self._cameras:
-            rgb, depth = self.world.render(camera, width, height, with_depth=self._publish_depth)
-            frames.append((self._camera_pubs[camera], conv.color_image_msg(now, camera, rgb),
+        for camera, with_depth in watched:
+            publishers = self._camera_pubs[camera]
+            rgb, depth = self.world.render(camera, width, height, with_depth=with_depth)
+            frames.append((publishers, conv.color_image_msg(now, camera, rgb),
                            conv.depth_image_msg(now, camera, depth) if depth is not None else None,
                            conv.camera_info_msg(now, camera, self.world.camera_intrinsics(camera, width, height))))
         return frames
