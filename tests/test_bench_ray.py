@@ -53,3 +53,15 @@ def test_the_ray_executor_runs_the_local_executors_episodes_and_resumes(ros_isol
     again = _run(ray, 'ray', int(ros_isolation), resume=True)
     assert _lines(ray) == resumed
     assert again['episodes'] == 4 and again['overall'] == local_summary['overall']
+
+
+def test_the_runs_own_ray_instance_is_on_loopback():
+    from cap_bench import ray_executor
+
+    ray = ray_executor.start('', jobs=2)
+    try:
+        nodes = ray.nodes()
+        assert [node['NodeManagerAddress'] for node in nodes] == ['127.0.0.1']
+        assert ray.cluster_resources()['CPU'] == 2
+    finally:
+        ray.shutdown()
