@@ -42,12 +42,13 @@ def _run_job(index: int, keys: Sequence[str], options: BenchOptions, cassette_te
     os.environ['ROS_DOMAIN_ID'] = str(domain_id)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ.pop('ROS_LOCALHOST_ONLY', None)
-    # The driver's --out may be on another machine: the oracle cassette travels as text.
+    # This task may run on a machine without the driver's --out: the oracle cassette travels as text.
     with tempfile.TemporaryDirectory(prefix='cap-bench-') as folder:
         cassette = None
         if cassette_text is not None:
             cassette = pathlib.Path(folder) / 'oracle_cassette.yaml'
             cassette.write_text(cassette_text, encoding='utf-8')
+        # Pinned to CPU i of this machine (modulo its CPUs), as local job i is (see cap_bringup.cpu_affinity).
         graph = EpisodeGraph(options, lambda: _EpisodeRunner(options, cassette, cpu=index))
         try:
             for key in keys:
