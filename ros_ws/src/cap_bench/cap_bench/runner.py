@@ -65,6 +65,8 @@ class BenchOptions:
     api: str = 'chat'
     episode_timeout_s: float = 900.0
     first_domain_id: int | None = None  # job i runs on first_domain_id + i; None: see domain_ids()
+    executor: str = 'local'  # or 'ray' (cap_bench.ray_executor)
+    ray_address: str = ''  # for executor=ray: a cluster to join (host:6379); empty: a Ray instance for the run
     backend: str = 'http'  # for policy=llm: 'http' (base_url) or 'local' (a llama.cpp server started for the run)
     model_file: str = ''  # for backend=local; empty: the default model of `make model`
     model_threads: int = 1
@@ -182,35 +184,51 @@ def failed_record(episode: Episode, options: BenchOptions, reason: str = '') -> 
             'model_calls': 0, 'prompt_tokens': 0, 'completion_tokens': 0}
 
 
-def run_episodes(keys: Sequence[str], options: BenchOptions, make_runner: Callable[[], Any],
+def run_episodes(keys: Iterable[str], options: BenchOptions, make_runner: Callable[[], Any],
                  write: Callable[[dict], None]) -> int:
     """Run the episodes `keys` one after another on a graph from `make_runner()`, writing each record; return how
-    many graphs were built.
-
-    A graph that stops answering (a service or a goal without an answer in time: TimeoutError) costs its episode,
-    recorded as failed with the reason, not the rest of the run: they continue on a new graph.
-    """
-    runner = make_runner()
-    built = 1
+    many graphs were built (see EpisodeGraph)."""
+    graph = EpisodeGraph(options, make_runner)
     try:
         for key in keys:
-            group, template, seed = key.split('/')
-            episode = sample_episode(group, template, int(seed))
-            try:
-                record = runner.run(episode)
-            except TimeoutError as error:
-                record = failed_record(episode, options, f'the graph stopped answering ({error}); the episodes '
-                                                         'after it ran on a new graph')
-                print(f'{record["key"]}: {record["reason"]}', file=sys.stderr)
-                runner.close()
-                runner = None
-                runner = make_runner()
-                built += 1
-            write(record)
+            write(graph.run(key))
     finally:
-        if runner is not None:
-            runner.close()
-    return built
+        graph.close()
+    return graph.built
+
+
+class EpisodeGraph:
+    """Episodes run one at a time on a graph from `make_runner()`, built at once.
+
+    A graph that stops answering (a service or a goal without an answer in time: TimeoutError) costs its episode,
+    recorded as failed with the reason, not the rest of the run: it is closed, and the next episodes run on a new one.
+    """
+
+    def __init__(self, options: BenchOptions, make_runner: Callable[[], Any]) -> None:
+        self.options, self.make_runner = options, make_runner
+        self.runner = make_runner()
+        self.built = 1
+
+    def run(self, key: str) -> dict:
+        """The record of the episode `key` ('group/template/seed')."""
+        group, template, seed = key.split('/')
+        episode = sample_episode(group, template, int(seed))
+        try:
+            return self.runner.run(episode)
+        except TimeoutError as error:
+            record = failed_record(episode, self.options, f'the graph stopped answering ({error}); the episodes '
+                                                          'after it ran on a new graph')
+            print(f'{record["key"]}: {record["reason"]}', file=sys.stderr)
+            self.runner.close()
+            self.runner = None
+            self.runner = self.make_runner()
+            self.built += 1
+            return record
+
+    def close(self) -> None:
+        if self.runner is not None:
+            self.runner.close()
+            self.runner = None
 
 
 class _EpisodeRunner:
@@ -373,13 +391,18 @@ def _worker(index: int, keys: list[str], options: BenchOptions, cassette: str | 
     # Job i on CPU i: each job's threads share one interpreter lock (see cap_bringup.cpu_affinity).
     with open(results, 'a', encoding='utf-8') as out:
         def write(record: dict) -> None:
-            out.write(json.dumps(record) + '\n')
-            out.flush()
+            write_record(out, record)
             if progress is not None:
                 progress.put(record['success'])
 
         run_episodes(keys, options, lambda: _EpisodeRunner(options, pathlib.Path(cassette) if cassette else None,
                                                            cpu=index), write)
+
+
+def write_record(out, record: dict) -> None:
+    """Append `record` to an episodes*.jsonl file, at once (a run stopped later keeps it)."""
+    out.write(json.dumps(record) + '\n')
+    out.flush()
 
 
 def load_records(out_dir: pathlib.Path) -> list[dict]:
@@ -412,7 +435,13 @@ def run_benchmark(options: BenchOptions, show_progress: bool = True) -> dict:
     jobs = max(1, min(options.jobs, len(todo)))
     shards = [[episode_key(e.group, e.template, e.seed) for e in todo[i::jobs]] for i in range(jobs)]
     if todo:
-        _run_shards(shards, options, cassette, out_dir, show_progress, len(episodes), len(episodes) - len(todo))
+        with progress_bar(show_progress, len(episodes), len(episodes) - len(todo)) as count:
+            if options.executor == 'ray':
+                from cap_bench import ray_executor  # only here: the local executor never loads Ray
+
+                ray_executor.run_jobs(shards, options, cassette, out_dir, count)
+            else:
+                _run_shards(shards, options, cassette, out_dir, count)
     records = [r for r in load_records(out_dir)
                if r['key'] in {episode_key(e.group, e.template, e.seed) for e in episodes}]
     title = (f"Table-top benchmark ({policy_name(options)}): perception {options.perception}, "
@@ -423,7 +452,32 @@ def run_benchmark(options: BenchOptions, show_progress: bool = True) -> dict:
     return summary
 
 
-def _run_shards(shards, options, cassette, out_dir, show_progress, total, already) -> None:
+@contextlib.contextmanager
+def progress_bar(show: bool, total: int, already: int) -> Iterator[Callable[[bool], None]]:
+    """A function to call with each finished episode's success: a progress bar on the terminal when `show`."""
+    if not show:
+        yield lambda success: None
+        return
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+    bar = Progress(TextColumn('[bold]cap bench'), BarColumn(), MofNCompleteColumn(),
+                   TextColumn('{task.fields[ok]}'), TimeRemainingColumn())
+    task = bar.add_task('episodes', total=total, completed=already, ok='')
+    finished, successes = already, 0
+
+    def count(success: bool) -> None:
+        nonlocal finished, successes
+        finished += 1
+        successes += bool(success)
+        bar.update(task, completed=finished, ok=f'{successes}/{finished - already} succeeded')
+
+    bar.start()
+    try:
+        yield count
+    finally:
+        bar.stop()
+
+
+def _run_shards(shards, options, cassette, out_dir, count) -> None:
     context = multiprocessing.get_context('spawn')
     progress = context.Queue()
     processes = [context.Process(target=_worker, args=(i, keys, options, str(cassette) if cassette else None,
@@ -431,14 +485,6 @@ def _run_shards(shards, options, cassette, out_dir, show_progress, total, alread
                  for i, keys in enumerate(shards) if keys]
     for process in processes:
         process.start()
-    finished, successes = already, 0
-    bar = None
-    if show_progress:
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-        bar = Progress(TextColumn('[bold]cap bench'), BarColumn(), MofNCompleteColumn(),
-                       TextColumn('{task.fields[ok]}'), TimeRemainingColumn())
-        bar.start()
-        task = bar.add_task('episodes', total=total, completed=already, ok='')
     interrupted = False
     try:
         while any(p.is_alive() for p in processes) or not progress.empty():
@@ -446,10 +492,7 @@ def _run_shards(shards, options, cassette, out_dir, show_progress, total, alread
                 success = progress.get(timeout=0.5)
             except queue.Empty:  # nothing finished in this half second
                 continue
-            finished += 1
-            successes += bool(success)
-            if bar is not None:
-                bar.update(task, completed=finished, ok=f'{successes}/{finished - already} succeeded')
+            count(success)
     except BaseException:  # Ctrl-C, SIGTERM (see main): end the workers, each closing its graph
         interrupted = True
         for process in processes:
@@ -457,8 +500,6 @@ def _run_shards(shards, options, cassette, out_dir, show_progress, total, alread
                 process.terminate()
         raise
     finally:
-        if bar is not None:
-            bar.stop()
         for process in processes:
             process.join(timeout=30 if interrupted else None)
             if process.is_alive():  # a worker that did not close in time
@@ -483,6 +524,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--jobs', type=int, default=1,
                         help='parallel graphs (processes) [1]; job i uses ROS_DOMAIN_ID + i when ROS_DOMAIN_ID is '
                              'set, else consecutive ids from a start derived from the process id')
+    parser.add_argument('--executor', choices=('local', 'ray'), default='local',
+                        help='local: a process per job on this machine; ray: a task per job on a Ray cluster, on '
+                             'one machine or several [local]')
+    parser.add_argument('--ray-address', default='',
+                        help='with --executor ray: the cluster to join (HEAD:6379, `ray start --head` on HEAD); '
+                             'default: a Ray instance on 127.0.0.1 for this run')
     parser.add_argument('--out', default='output/bench', help='output folder [output/bench]')
     parser.add_argument('--resume', action='store_true', help='keep the episodes already in --out')
     add_model_arguments(parser, default_api='chat')
@@ -532,7 +579,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     options = BenchOptions(policy=args.policy, groups=groups, tasks=tasks, trials=args.trials,
                            perception=args.perception, base_seed=args.seed, jobs=args.jobs, out=args.out,
-                           resume=args.resume, episode_timeout_s=args.episode_timeout, **model_settings(args))
+                           resume=args.resume, episode_timeout_s=args.episode_timeout, executor=args.executor,
+                           ray_address=args.ray_address, **model_settings(args))
     try:
         domain_ids(options.jobs)
     except ValueError as error:
