@@ -184,8 +184,6 @@ class PickPlaceConfig:
                                              'bottom.')
     gripper_open_width: float = parameter(0.085, 'Opening of the open gripper [m].')
     gripper_side_room: float = parameter(0.01, 'Room needed on either side of an object to close around it [m].')
-    approach_side_room: float = parameter(0.015, 'Opening on the approach: the object\'s width plus this on each '
-                                          'side (a shorter close than from fully open) [m].')
     # A fully opened gripper could push a bowl's wall.
     release_side_room: float = parameter(0.01, 'Opening on release: the object\'s width plus this on each side [m].')
     grip_force: float = parameter(20.0, 'Grip force per finger when grasping [N].')
@@ -258,13 +256,15 @@ class TrajectoryStep:
 class GripperStep:
     """Command the gripper opening [m] with at most `max_effort` [N] (0 = the gripper's default).
 
-    With `unless_open_at_least` [m], the step is skipped when the fingers are already open that wide (an approach
-    after a release needs no gripper motion of its own).
+    With `unless_open_at_least` [m], the step is skipped when the fingers are already open that wide. With `wait`
+    False, the stage's next motion starts at once and the stage waits for the gripper at its end (the fingers open
+    while the arm travels).
     """
 
     position: float
     max_effort: float = 0.0
     unless_open_at_least: float | None = None
+    wait: bool = True
 
 
 Step = Union[TrajectoryStep, GripperStep]
@@ -735,9 +735,9 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     place_point = (place_xy[0], place_xy[1], place_z)
 
     # Approach: rise straight up first if the gripper is low (it may be among objects), then move above the object.
-    approach_steps: list[Step] = [GripperStep(min(config.gripper_open_width,
-                                                  grasp_width + 2 * config.approach_side_room),
-                                              unless_open_at_least=grasp_width + 2 * config.gripper_side_room)]
+    # The fingers open fully (room for the aim's errors) while the arm travels.
+    approach_steps: list[Step] = [GripperStep(config.gripper_open_width, wait=False,
+                                              unless_open_at_least=config.gripper_open_width - 0.002)]
     start_tcp = forward_kinematics(planner.joints, config.tool_offset)
     if start_tcp[2, 3] < lowest_travel_z and start_tcp[2, 2] < -0.99:
         start_yaw = math.atan2(start_tcp[1, 0], start_tcp[0, 0])

@@ -37,7 +37,7 @@ from cap_control.pick_place import (
 )
 from cap_control.ports import (
     Arm, ArmOutcome, ArmResult, Ending, Failed, GoalRun, Gripper, GripperOutcome, Interrupted, Interruption,
-    ObjectReport, Perception, WaitTimeouts, interruption_message,
+    ObjectReport, PendingGoal, Perception, WaitTimeouts, interruption_message,
 )
 
 # Perception has no push for "a newer observation": after the retreat it is asked again this often [s] (a camera
@@ -205,11 +205,16 @@ class _Run(GoalRun):
         for stage in plan.stages:
             self.check_interrupted()
             feedback(stage.name, float(done))
+            opening = None  # a gripper goal running beside the stage's motions
             for step in stage.steps:
                 if isinstance(step, TrajectoryStep):
                     self.move(plan, step)
+                elif step.wait:
+                    self.grip_result(self.grip(step), observation)
                 else:
-                    self.grip(step, observation)
+                    opening = self.grip(step)
+            if opening is not None:
+                self.grip_result(opening, observation)
             if stage.name == StageName.RETREAT:
                 # The outcome is judged on what perception sees after the retreat, not on what it last saw.
                 self.wait_for_fresh_view(plan.object.name)
@@ -236,16 +241,28 @@ class _Run(GoalRun):
             return
         raise Failed(PickPlaceErrorCode.UNKNOWN, f'the arm did not complete its motion: {outcome.message}')
 
-    def grip(self, step: GripperStep, observation: Observation) -> None:
+    def grip(self, step: GripperStep) -> PendingGoal | None:
+        """Send the gripper command (None when the step is skipped: the fingers are open enough already)."""
         if step.unless_open_at_least is not None:
             opening = self.arm.opening()
             if opening is not None and opening >= step.unless_open_at_least:
-                return
+                return None
         self.available(self.gripper.server_ready(), self.gripper.server_description)
         goal = self.gripper.command(step.position, step.max_effort)
         self.send(goal, 'the gripper', 'the gripper refused the command')
+        return goal
+
+    def grip_result(self, goal: PendingGoal | None, observation: Observation) -> None:
+        """Wait for the gripper command's end (if one was sent) and note the fingers' outcome.
+
+        A command running beside a motion is no longer the active goal (the motion is): an interruption cancels the
+        motion, and the fingers, which were only opening, finish on their own.
+        """
+        if goal is None:
+            return
         outcome: GripperOutcome = self.answer(goal.result, self.timeouts.gripper_timeout, 'the gripper')
-        self.active = None
+        if self.active is goal:
+            self.active = None
         observation.gripper_position = outcome.width
         observation.gripper_stalled = outcome.stalled
 

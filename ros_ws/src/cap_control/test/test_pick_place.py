@@ -57,10 +57,9 @@ def test_block_into_bowl_plan_runs_the_stages_in_order_and_chains_its_motions():
     # Gripper: open on the way, closed with force to grasp, open to release.
     assert isinstance(stage(plan, StageName.APPROACH).steps[0], GripperStep)
     opening = stage(plan, StageName.APPROACH).steps[0]
-    # Open wider than the block by the room to close around it (not necessarily fully: a shorter close), and no
-    # gripper motion at all when the fingers are already that far apart.
-    assert opening.position >= 0.04 + 2 * PickPlaceConfig().gripper_side_room
-    assert opening.unless_open_at_least == pytest.approx(0.04 + 2 * PickPlaceConfig().gripper_side_room)
+    # Fully open, while the arm travels (not before), and no gripper motion when the fingers are open already.
+    assert opening.position == PickPlaceConfig().gripper_open_width and not opening.wait
+    assert opening.unless_open_at_least < opening.position
     close = stage(plan, StageName.GRASP).steps[0]
     # Inside the block's width: the fingers stop on it and squeeze with the full force.
     assert close.position < 0.04 and close.max_effort > 0

@@ -214,7 +214,7 @@ def test_fingers_too_close_together_open_on_the_approach(table):
     outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
     assert outcome.code == PickPlaceErrorCode.NONE, outcome.message
     approach_opening, grasp = world.gripper_commands[:2]
-    assert approach_opening[0] >= BLOCK[1] + 2 * PickPlaceConfig().gripper_side_room
+    assert approach_opening[0] == PickPlaceConfig().gripper_open_width
     assert grasp == pytest.approx((BLOCK[1] - PickPlaceConfig().grasp_squeeze, PickPlaceConfig().grip_force))
 
 

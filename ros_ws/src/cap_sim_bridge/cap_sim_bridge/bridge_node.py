@@ -13,9 +13,10 @@ stopped. The physics runs in a thread of its own (never on an executor thread); 
 while a motion runs, need a MultiThreadedExecutor with a few threads (main() uses 8). Parameters: SimBridgeConfig
 (cap_sim_bridge.config).
 
-Idle: in real time, once no goal has run and nothing has moved for `idle_after` seconds (rest.py), /clock,
-/joint_states, the objects and the cameras drop to their idle rates (the cameras resend the frame rendered when the
-world came to rest); a goal or a reset ends the idling at once. As fast as possible, the bridge never idles.
+Idle: once no goal has run and nothing has moved for `idle_after` seconds (rest.py), /clock, /joint_states, the
+objects and the cameras drop to their idle rates (the cameras resend the frame rendered when the world came to
+rest); a goal or a reset ends the idling at once. As fast as possible, an idle world also slows down to
+`idle_speed` times the wall clock: a graph that waits for a program or a model leaves them the CPU.
 
 QoS, chosen on purpose:
 - /clock, /joint_states: reliable, keep last 10 (the defaults robot_state_publisher and sim-time users expect;
@@ -51,7 +52,7 @@ from cap_ros_common.parameters import declare_config
 from cap_ros_common.time import duration_msg, time_msg
 from cap_sim_bridge import ros_conversions as conv
 from cap_sim_bridge import trajectory_goal
-from cap_sim_bridge.pacing import Pacer
+from cap_sim_bridge.pacing import LoopPacing
 from cap_sim_bridge.rest import RestWatch
 from cap_sim_bridge.config import SimBridgeConfig, cameras_to_publish
 from cap_sim_bridge.lockstep import Lockstep
@@ -159,9 +160,8 @@ class SimBridgeNode(Node):
     def _run_physics(self) -> None:
         world = self.world
         config = self.config
-        pacer = Pacer(self._real_time_factor)
-        # Idle (real time only: as fast as possible, simulated time would race ahead while nothing happens).
-        rest = RestWatch(config.idle_after if self._real_time_factor > 0 else 0.0)
+        pacer = LoopPacing(self._real_time_factor, config.idle_speed)
+        rest = RestWatch(config.idle_after if self._real_time_factor > 0 or pacer.slows_when_idle else 0.0)
         next_objects = next_camera = next_ink = world.time
         ink_version = -1  # the ink version last published
         last_state_wall = last_objects_wall = -math.inf
@@ -219,7 +219,7 @@ class SimBridgeNode(Node):
                     # A reset simulates the settling at once: pace from here rather than wait for the wall clock.
                     self._scene_reset.clear()
                     pacer.restart()
-                delay = pacer.delay(now)
+                delay = pacer.delay(now, idle)
                 if delay > 0:
                     self._woken.wait(delay)  # a goal that arrives ends the wait (and the idling)
                 else:

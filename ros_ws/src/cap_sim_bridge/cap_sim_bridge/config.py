@@ -25,8 +25,12 @@ class SimBridgeConfig:
     state_rate: float = parameter(100.0, 'Rate of /clock and /joint_states [Hz of simulated time].')
     objects_rate: float = parameter(10.0, 'Rate of the ground-truth object array [Hz of simulated time].')
     camera_rate: float = parameter(10.0, 'Rate of camera images [Hz of simulated time]; 0 = no images.')
-    idle_after: float = parameter(1.0, 'With real_time: after this long [s of simulated time] with no goal running '
-                                       'and nothing moving, publish at the idle rates below; 0 = never.')
+    idle_after: float = parameter(1.0, 'After this long [s of simulated time] with no goal running and nothing '
+                                       'moving, publish at the idle rates below (and, without real_time, slow down to '
+                                       'idle_speed); 0 = never.')
+    idle_speed: float = parameter(10.0, 'Without real_time, while idle: simulated seconds per wall second, instead of '
+                                        'as fast as possible (a graph waiting for a program or a model leaves them '
+                                        'the CPU); 0 = as fast as possible while idle too.')
     idle_state_rate: float = parameter(5.0, 'Rate of /clock and /joint_states while idle [Hz].')
     idle_objects_rate: float = parameter(1.0, 'Rate of the ground-truth object array while idle [Hz].')
     idle_camera_rate: float = parameter(1.0, 'Rate of camera images while idle [Hz]: the frame rendered when the '

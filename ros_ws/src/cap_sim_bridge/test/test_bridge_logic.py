@@ -1,4 +1,4 @@
-"""The plain logic behind the bridge node: goal checking (control_msgs semantics) and real-time pacing."""
+"""The plain logic behind the bridge node: goal checking (control_msgs semantics) and the physics loop's pacing."""
 import math
 
 import numpy as np
@@ -9,7 +9,7 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 from cap_interfaces.action import FollowJointTrajectory
 from cap_interfaces.msg import JointTolerance
 from cap_sim_bridge import trajectory_goal
-from cap_sim_bridge.pacing import Pacer
+from cap_sim_bridge.pacing import LoopPacing, Pacer
 from cap_sim_bridge.world import ARM_JOINT_NAMES
 
 HOLD = np.arange(6) * 0.1
@@ -119,3 +119,28 @@ def test_a_restarted_pacer_does_not_wait_for_a_jump_in_simulated_time():
     pacer.restart()
     assert pacer.delay(0.5) == 0.0  # e.g. half a second of settling simulated at once on a reset
     assert pacer.delay(0.6) == pytest.approx(0.1)
+
+
+def test_as_fast_as_possible_the_loop_slows_to_its_idle_speed_only_while_idle():
+    wall = FakeWallClock()
+    pacing = LoopPacing(0.0, idle_speed=10.0, clock=wall)
+    assert pacing.slows_when_idle
+    assert pacing.delay(5.0, idle=False) == 0.0  # busy: as fast as possible
+    assert pacing.delay(6.0, idle=True) == 0.0  # idle from here: paced from this point on
+    assert pacing.delay(7.0, idle=True) == pytest.approx(0.1)  # 1 simulated second = 0.1 s of wall at 10x
+    assert pacing.delay(60.0, idle=False) == 0.0  # a goal: full speed again at once
+    wall.now += 0.01
+    assert pacing.delay(61.0, idle=True) == 0.0  # a new idle spell does not pay for the busy one
+    assert pacing.delay(61.5, idle=True) == pytest.approx(0.05)
+
+
+def test_in_real_time_or_without_an_idle_speed_idleness_does_not_change_the_pace():
+    wall = FakeWallClock()
+    real_time = LoopPacing(1.0, idle_speed=10.0, clock=wall)
+    assert not real_time.slows_when_idle
+    real_time.delay(0.0, idle=True)
+    assert real_time.delay(0.5, idle=True) == pytest.approx(0.5)
+    assert real_time.delay(0.5, idle=False) == pytest.approx(0.5)
+    unpaced = LoopPacing(0.0, idle_speed=0.0, clock=wall)
+    assert not unpaced.slows_when_idle
+    assert unpaced.delay(100.0, idle=True) == 0.0
