@@ -43,17 +43,11 @@ class JointTrajectory:
 
     def sample(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(position, velocity) references at time t."""
-        times = self.times
-        if t <= times[0]:
-            return self.positions[0].copy(), np.zeros(self.positions.shape[1])
-        if t >= times[-1]:
-            return self.positions[-1].copy(), np.zeros(self.positions.shape[1])
-        i = int(np.searchsorted(times, t, side='right')) - 1
-        duration = times[i + 1] - times[i]
-        s = (t - times[i]) / duration
-        p0, p1 = self.positions[i], self.positions[i + 1]
-        # Cubic Hermite basis on s in [0, 1]; velocities scale with the segment's duration.
-        v0, v1 = self.velocities[i] * duration, self.velocities[i + 1] * duration
+        segment = self._segment(t)
+        if segment is None:
+            at_end = self.positions[-1] if t >= self.times[-1] else self.positions[0]
+            return at_end.copy(), np.zeros(self.positions.shape[1])
+        duration, s, p0, v0, p1, v1 = segment
         s2, s3 = s * s, s * s * s
         position = ((2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * v0 + (-2 * s3 + 3 * s2) * p1
                     + (s3 - s2) * v1)
@@ -61,18 +55,25 @@ class JointTrajectory:
                     + (3 * s2 - 2 * s) * v1) / duration
         return position, velocity
 
-
     def sample_acceleration(self, t: float) -> np.ndarray:
         """The reference acceleration at time t (the second derivative of the segment's spline; zero outside)."""
+        segment = self._segment(t)
+        if segment is None:
+            return np.zeros(self.positions.shape[1])
+        duration, s, p0, v0, p1, v1 = segment
+        return ((12 * s - 6) * p0 + (6 * s - 4) * v0 + (6 - 12 * s) * p1 + (6 * s - 2) * v1) / (duration * duration)
+
+    def _segment(self, t: float) -> tuple | None:
+        """(duration, s in [0, 1], p0, v0, p1, v1) of the segment holding t, or None outside the trajectory.
+
+        Cubic Hermite basis on s; the velocities are scaled by the segment's duration."""
         times = self.times
         if t <= times[0] or t >= times[-1]:
-            return np.zeros(self.positions.shape[1])
+            return None
         i = int(np.searchsorted(times, t, side='right')) - 1
         duration = times[i + 1] - times[i]
-        s = (t - times[i]) / duration
-        p0, p1 = self.positions[i], self.positions[i + 1]
-        v0, v1 = self.velocities[i] * duration, self.velocities[i + 1] * duration
-        return ((12 * s - 6) * p0 + (6 * s - 4) * v0 + (6 - 12 * s) * p1 + (6 * s - 2) * v1) / (duration * duration)
+        return (duration, (t - times[i]) / duration, self.positions[i], self.velocities[i] * duration,
+                self.positions[i + 1], self.velocities[i + 1] * duration)
 
 
 def _estimated_velocities(times: np.ndarray, positions: np.ndarray) -> np.ndarray:
