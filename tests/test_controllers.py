@@ -95,8 +95,13 @@ class User:
         return result.result().result
 
     def reset_scene(self, seed: int) -> None:
+        """Resets the scene and returns once the simulator has published the reset world twice (the first state
+        may have left before the reset; a test reads `latest()` right after)."""
+        with self._lock:
+            published = len(self.states)
         future = self.reset.call_async(ResetScene.Request(seed=seed))
         assert wait(future.done) and future.result().success
+        assert wait(lambda: len(self.states) >= published + 2), 'no joint states after the reset'
 
     def close(self) -> None:
         self.node.destroy_node()
