@@ -626,6 +626,19 @@ def target_taken_by(obj: ObjectInfo, place_xy: Sequence[float], neighbours: Sequ
     return None
 
 
+def overlapping_at(obj: ObjectInfo, place_xy: Sequence[float], others: Sequence[ObjectInfo]) -> list[ObjectInfo]:
+    """The objects of `others` whose footprint `obj`'s overlaps with its centre at `place_xy` (world-axis boxes, as
+    in target_taken_by)."""
+    half_x, half_y = footprint_half_extents(obj)
+    overlapping = []
+    for other in others:
+        other_x, other_y = footprint_half_extents(other)
+        if abs(place_xy[0] - other.position[0]) < half_x + other_x and \
+                abs(place_xy[1] - other.position[1]) < half_y + other_y:
+            overlapping.append(other)
+    return overlapping
+
+
 def off_table_reason(name: str, position: Sequence[float], workspace: Workspace) -> str | None:
     """Why an object seen at `position` (its centre) is no longer on the table, or None if it is on it."""
     x, y, z = (float(v) for v in position[:3])
@@ -760,9 +773,12 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     place_yaw = _roomiest_yaw(planner, place_point, yaws, [other for other in neighbours if other.name not in below],
                               release_width / 2 + config.finger_thickness, config, target_description)
     move = planner.travel(above_target, place_yaw, f'above {target_description}', lowest_travel_z)
-    # Down fast to just above the expected contact, then slowly, stopping at a touch-down.
-    place = [planner.line((place_xy[0], place_xy[1], place_z + config.touchdown_height), place_yaw,
-                          target_description),
+    # Down fast to just above the expected contact, then slowly, stopping at a touch-down. The contact may come
+    # sooner: set down by a bowl, the held object meets its rim first.
+    slow_from_z = place_z + config.touchdown_height
+    for other in overlapping_at(obj, place_xy, [other for other in neighbours if other.name not in below]):
+        slow_from_z = max(slow_from_z, other.top + held_below_tcp + config.touchdown_height)
+    place = [planner.line((place_xy[0], place_xy[1], min(slow_from_z, travel_z)), place_yaw, target_description),
              planner.line(place_point, place_yaw, target_description, stop_on_contact=True,
                           limits=config.touchdown_limits)]
     retreat = [planner.line(above_target, place_yaw, f'above {target_description}')]

@@ -208,7 +208,7 @@ class _Run(GoalRun):
             opening = None  # a gripper goal running beside the stage's motions
             for step in stage.steps:
                 if isinstance(step, TrajectoryStep):
-                    self.move(plan, step)
+                    self.move(plan, step, stage.name)
                 elif step.wait:
                     self.grip_result(self.grip(step), observation)
                 else:
@@ -222,7 +222,7 @@ class _Run(GoalRun):
             done = stage.progress
         feedback(plan.stages[-1].name, 1.0)
 
-    def move(self, plan: PickPlacePlan, step: TrajectoryStep) -> None:
+    def move(self, plan: PickPlacePlan, step: TrajectoryStep, stage: StageName) -> None:
         trajectory = plan.trajectory_for(step, self.current_joints())
         if len(trajectory) < 2:
             return
@@ -239,7 +239,8 @@ class _Run(GoalRun):
             # a few milliradians short of its goal): placing ends here.
             self.executor.log('debug', f'touched down: {outcome.message}')
             return
-        raise Failed(PickPlaceErrorCode.UNKNOWN, f'the arm did not complete its motion: {outcome.message}')
+        raise Failed(PickPlaceErrorCode.UNKNOWN,
+                     f'the arm did not complete its motion ({stage.value}): {outcome.message}')
 
     def grip(self, step: GripperStep) -> PendingGoal | None:
         """Send the gripper command (None when the step is skipped: the fingers are open enough already)."""

@@ -106,6 +106,24 @@ def test_place_height_stacks_on_blocks_drops_into_bowls_and_sets_down_on_the_tab
         assert 0.0 < held_bottom <= 0.01, 'released just above the table'
 
 
+def test_set_down_by_a_bowl_the_descent_slows_above_its_rim():
+    """The held block's footprint reaches over the bowl's rim: the fast descent ends above the rim (which the block
+    meets first), and the slow touch-down goes on from there to the table."""
+    red = block('red block', 0.15, -0.45)
+    blue = bowl('blue bowl', -0.1, -0.65)
+    plan = plan_pick_place(red, (-0.1, -0.565), HOME_JOINTS, neighbours=[blue])
+    descent, place_step = stage(plan, StageName.PLACE).steps
+    held_below_tcp = plan.grasp_z - red.bottom
+    descent_end = forward_kinematics(descent.trajectory.end)[2, 3]
+    assert descent_end == pytest.approx(blue.top + held_below_tcp + plan.config.touchdown_height, abs=1e-6)
+    assert place_step.stop_on_contact
+    assert forward_kinematics(place_step.trajectory.end)[2, 3] == pytest.approx(plan.place_z, abs=1e-6)
+    # Away from the bowl, the descent ends just above the table as usual.
+    clear = plan_pick_place(red, (0.1, -0.55), HOME_JOINTS, neighbours=[blue])
+    clear_end = forward_kinematics(stage(clear, StageName.PLACE).steps[0].trajectory.end)[2, 3]
+    assert clear_end == pytest.approx(clear.place_z + clear.config.touchdown_height, abs=1e-6)
+
+
 def test_a_block_goes_into_a_bowl_squarely_on_top_of_the_blocks_already_there():
     red = block('red block', 0.15, -0.45)
     blue_bowl = bowl('blue bowl', -0.1, -0.65)

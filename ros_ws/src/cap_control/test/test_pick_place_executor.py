@@ -315,8 +315,8 @@ def test_a_tracking_error_outside_the_place_descent_fails_the_motion(table):
     world.follow = lambda trajectory, tolerance: (world.trajectories.append((world.stages[-1], trajectory, tolerance))
                                                   or FakeGoal(ArmOutcome(ArmResult.TOLERANCE_VIOLATED, 'strayed')))
     outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
-    assert (outcome.code, outcome.message) == (PickPlaceErrorCode.UNKNOWN, 'the arm did not complete its motion: '
-                                                                          'strayed')
+    assert (outcome.code, outcome.message) == (PickPlaceErrorCode.UNKNOWN,
+                                               'the arm did not complete its motion (approach): strayed')
     assert world.stage_motions() == [StageName.APPROACH]
 
 
