@@ -35,6 +35,7 @@ from rclpy.parameter import Parameter
 from cap_bringup.cpu_affinity import pin_to_one_cpu
 from cap_bringup.namespaces import normalise_namespace
 from cap_bringup.nodes import LMP_NODE, SIM_BRIDGE_NODE, graph_nodes, node_class
+from cap_bringup.qos_events import drop_default_event_handlers
 from cap_interfaces.msg import GraphNames
 from cap_lmp_ros.domains.registry import get_domain
 from cap_lmp_ros.thread_watch import ThreadWatch
@@ -290,7 +291,11 @@ class Graph:
                 node = node_class(spec)(context=context, parameter_overrides=[
                     Parameter(name, value=value) for name, value in values.items()], **placed, **watched)
                 self.nodes[spec.name] = node
-                (quick if is_quick(spec.name, values) else self.executor).add_node(node)
+                if is_quick(spec.name, values):
+                    quick.add_node(node)
+                else:  # a wait set rebuilt in Python at every wake-up: only what can wake it (qos_events.py)
+                    drop_default_event_handlers(node)
+                    self.executor.add_node(node)
             # Perception's answers reach every client of its services in the process, waking each client's
             # executor: all of them live on the events executor, where a wake-up for another client is cheap.
             sim_time = [Parameter('use_sim_time', value=True)]
