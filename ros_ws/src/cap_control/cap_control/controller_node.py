@@ -32,6 +32,7 @@ from cap_controllers import plants
 from cap_interfaces.action import RunController
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import CallController, ControlStep, GetPlantState
+from cap_ros_common.actions import RESULT_TIMEOUT_S
 from cap_ros_common.parameters import declare_config
 
 STOP_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)  # a stop must not be lost
@@ -125,7 +126,7 @@ class ControllerNode(Node):
                             callback_group=self._group)
         self._server = ActionServer(self, RunController, GraphNames.RUN_CONTROLLER_ACTION, self._execute,
                                     goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=self._on_cancel,
-                                    callback_group=self._group)
+                                    result_timeout=RESULT_TIMEOUT_S, callback_group=self._group)
 
     def _create_clients(self, node: Node) -> None:
         self._step_client = node.create_client(ControlStep, GraphNames.SIM_CONTROL_STEP_SERVICE,

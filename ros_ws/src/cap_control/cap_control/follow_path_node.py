@@ -11,6 +11,7 @@ PathTimeouts, whose fields hold every default.
 from __future__ import annotations
 
 import numpy as np
+from cap_ros_common.actions import RESULT_TIMEOUT_S
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.time import to_seconds
 from cap_whiteboard import tool as tools
@@ -54,7 +55,7 @@ class FollowPathNode(ArmNode):
                                  stop_source=GraphNames.STOP_TOPIC, log=self._log)
         self._server = ActionServer(self, FollowPath, GraphNames.FOLLOW_PATH_ACTION, self._execute,
                                     goal_callback=self._on_goal, cancel_callback=self._on_cancel,
-                                    callback_group=self.callbacks)
+                                    result_timeout=RESULT_TIMEOUT_S, callback_group=self.callbacks)
         self.get_logger().info(f'path following ready; surface {self.config.surface.describe()}')
 
     def destroy_node(self) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from concurrent.futures import Future
 
+from cap_ros_common.actions import RESULT_TIMEOUT_S
 from cap_ros_common.parameters import declare_config
 from rclpy.action import ActionClient, ActionServer
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -75,7 +76,7 @@ class PickPlaceNode(ArmNode):
                                            self.timeouts, stop_source=GraphNames.STOP_TOPIC, log=self._log)
         self._server = ActionServer(self, PickPlace, GraphNames.PICK_PLACE_ACTION, self._execute,
                                     goal_callback=self._on_goal, cancel_callback=self._on_cancel,
-                                    callback_group=self.callbacks)
+                                    result_timeout=RESULT_TIMEOUT_S, callback_group=self.callbacks)
         self.get_logger().info(f'pick-and-place ready; workspace {self.config.workspace.describe()}')
 
     def _create_perception_clients(self, node) -> None:

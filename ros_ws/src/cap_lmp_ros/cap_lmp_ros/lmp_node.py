@@ -65,6 +65,7 @@ from cap_lmp_ros.config import RUNTIME_PARAMETERS, LmpNodeConfig
 from cap_lmp_ros.domains.registry import engine_api, get_domain, prompt_heads
 from cap_lmp_ros.plan_steps import PlanStep, plan_summary
 from cap_lmp_ros.thread_watch import FATAL_EXIT_CODE, ThreadWatch
+from cap_ros_common.actions import RESULT_TIMEOUT_S
 from cap_ros_common.parameters import declare_config, parameter_names
 
 # Commands and stops must not be lost: reliable, a few deep.
@@ -190,7 +191,7 @@ class LmpNode(Node):
         self.create_service(ApproveCommand, GraphNames.APPROVE_SERVICE, self._on_approve, callback_group=control)
         self._action = ActionServer(self, ExecuteCommand, GraphNames.EXECUTE_ACTION, self._execute_goal,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
-                                    callback_group=ReentrantCallbackGroup())
+                                    result_timeout=RESULT_TIMEOUT_S, callback_group=ReentrantCallbackGroup())
         # Registered after every declaration: declaring (with the start-up overrides) must not be refused.
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.thread_watch.add_callback(self._refuse_waiting)

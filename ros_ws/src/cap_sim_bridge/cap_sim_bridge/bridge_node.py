@@ -48,6 +48,7 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 from cap_interfaces.action import FollowJointTrajectory, GripperCommand
 from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import ControlStep, GetInk, PushTool, ResetScene
+from cap_ros_common.actions import RESULT_TIMEOUT_S
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.time import duration_msg, time_msg
 from cap_sim_bridge import ros_conversions as conv
@@ -124,12 +125,12 @@ class SimBridgeNode(Node):
             self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION,
             lambda handle: self._while_running(self._execute_trajectory, handle),
             goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
-            callback_group=callbacks)
+            result_timeout=RESULT_TIMEOUT_S, callback_group=callbacks)
         self._gripper_server = ActionServer(
             self, GripperCommand, GraphNames.SIM_GRIPPER_ACTION,
             lambda handle: self._while_running(self._execute_gripper, handle),
             goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
-            callback_group=callbacks)
+            result_timeout=RESULT_TIMEOUT_S, callback_group=callbacks)
 
         # Controllers: lockstep stepping of a plant, pushes on the tool.
         self._scene_joints = self.world.scene_joint_names()
