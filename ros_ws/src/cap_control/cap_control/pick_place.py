@@ -608,33 +608,27 @@ def check_place_on_table(obj: ObjectInfo, place_xy: Sequence[float], config: Pic
 
 def target_taken_by(obj: ObjectInfo, place_xy: Sequence[float], neighbours: Sequence[ObjectInfo],
                     config: PickPlaceConfig) -> ObjectInfo | None:
-    """The block that `obj`, set down on the table with its centre at `place_xy`, would come down on, if any.
+    """The block that `obj`, set down on the table with its centre at `place_xy`, would come down on, if any
+    (footprints as in overlapping_at, `target_room` apart). Bowls are not in the way: a point inside one puts the
+    object into it, and a bowl's sloping wall pushes an object set down on the rim outwards onto the table beside
+    it (1.4-2.5 cm from the point, measured), which the check after placing judges.
+    """
+    blocks = [other for other in neighbours if other.name != obj.name and other.category != CATEGORY_BOWL]
+    return next(iter(overlapping_at(obj, place_xy, blocks, config.target_room)), None)
+
+
+def overlapping_at(obj: ObjectInfo, place_xy: Sequence[float], others: Sequence[ObjectInfo],
+                   margin: float = 0.0) -> list[ObjectInfo]:
+    """The objects of `others` whose footprint comes within `margin` of `obj`'s with its centre at `place_xy`.
 
     Footprints are compared as world-axis boxes (a turned block's box is larger than the block: it errs on the
-    safe side). Bowls are not in the way: a point inside one puts the object into it, and a bowl's sloping wall
-    pushes an object set down on the rim outwards onto the table beside it (1.4-2.5 cm from the point, measured),
-    which the check after placing judges.
-    """
-    half_x, half_y = footprint_half_extents(obj)
-    for other in neighbours:
-        if other.name == obj.name or other.category == CATEGORY_BOWL:
-            continue
-        dx, dy = abs(place_xy[0] - other.position[0]), abs(place_xy[1] - other.position[1])
-        other_x, other_y = footprint_half_extents(other)
-        if dx < half_x + other_x + config.target_room and dy < half_y + other_y + config.target_room:
-            return other
-    return None
-
-
-def overlapping_at(obj: ObjectInfo, place_xy: Sequence[float], others: Sequence[ObjectInfo]) -> list[ObjectInfo]:
-    """The objects of `others` whose footprint `obj`'s overlaps with its centre at `place_xy` (world-axis boxes, as
-    in target_taken_by)."""
+    safe side)."""
     half_x, half_y = footprint_half_extents(obj)
     overlapping = []
     for other in others:
         other_x, other_y = footprint_half_extents(other)
-        if abs(place_xy[0] - other.position[0]) < half_x + other_x and \
-                abs(place_xy[1] - other.position[1]) < half_y + other_y:
+        if abs(place_xy[0] - other.position[0]) < half_x + other_x + margin and \
+                abs(place_xy[1] - other.position[1]) < half_y + other_y + margin:
             overlapping.append(other)
     return overlapping
 
