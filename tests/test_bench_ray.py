@@ -20,6 +20,12 @@ def _outcomes(out) -> dict:
             for r in load_records(out)}
 
 
+def _reasons(*outs) -> str:
+    """Why episodes failed, for an assertion's message."""
+    return '; '.join(f"{out.name} {r['key']}: {r['reason']}" for out in outs for r in load_records(out)
+                     if not r['success']) or 'no episode failed'
+
+
 def _lines(out) -> dict:
     return {path.name: path.read_text().splitlines() for path in sorted(out.glob('episodes*.jsonl'))}
 
@@ -30,8 +36,8 @@ def test_the_ray_executor_runs_the_local_executors_episodes_and_resumes(ros_isol
     ray_summary = _run(ray, 'ray', int(ros_isolation))
 
     assert len(_outcomes(ray)) == 4 == ray_summary['episodes']
-    assert _outcomes(ray) == _outcomes(local)
-    assert all(success for _, success, _, _ in _outcomes(ray).values())
+    assert _outcomes(ray) == _outcomes(local), _reasons(local, ray)
+    assert all(success for _, success, _, _ in _outcomes(ray).values()), _reasons(ray)
     assert sorted(_lines(ray)) == sorted(_lines(local)) == ['episodes-0.jsonl', 'episodes-1.jsonl']
     assert ray_summary['overall'] == local_summary['overall']
     assert json.loads((ray / 'options.json').read_text())['executor'] == 'ray'

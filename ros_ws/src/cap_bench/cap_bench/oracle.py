@@ -10,9 +10,15 @@ import numpy as np
 
 from cap_bench import table
 from cap_bench.episodes import MAGNITUDE_DISTANCES, ORDINALS, Episode
-from cap_tabletop.workspace import NORMALISED_ORIGIN, NORMALISED_SPAN
+from cap_tabletop.objects import BLOCK_SIZE, BOWL_RIM_RADIUS
+from cap_control.pick_place import PickPlaceConfig
+from cap_tabletop.workspace import NORMALISED_ORIGIN, NORMALISED_SPAN, TABLE_X_RANGE, TABLE_Y_RANGE
 
 _BLOCKS = "block_names = [name for name in get_obj_names() if name.endswith('block')]\n"
+# A block's centre stays this far inside the table's edges when placed (half of it and the robot's edge margin).
+_BLOCK_REACH = BLOCK_SIZE / 2 + PickPlaceConfig().edge_margin
+# Room from a spot to a bowl's rim that a block set down there needs (half its diagonal, and a little more).
+_RIM_ROOM = BLOCK_SIZE / np.sqrt(2) + 0.002
 _BOWLS = "bowl_names = [name for name in get_obj_names() if name.endswith('bowl')]\n"
 
 
@@ -36,24 +42,7 @@ def oracle_program(episode: Episode) -> str:
         return (_BLOCKS + "for lower, upper in zip(block_names, block_names[1:]):\n"
                           "    put_first_on_second(upper, lower)\n")
     if template == 'blocks_on_corner':
-        # Two short stacks side by side, far enough apart (7.5 cm) that the open fingers clear the neighbour
-        # whichever way they close: every block within 0.045 m of the place, and no tower tall enough to topple.
-        # The pair stands across the line to the table's middle, 1.5 cm in from the place, so that at a corner
-        # neither block hangs over an edge. The blocks nearest the place go first, so that none still stands on a
-        # spot when a block is set down there.
-        return (_BLOCKS + f"target_xy = {position_code(a['corner_side'])}\n"
-                          "block_names = sorted(block_names, key=lambda name: np.linalg.norm(get_obj_pos(name) - "
-                          "target_xy))\n"
-                          f"inward = np.array({list(table.SIDES['middle'])}) - target_xy\n"
-                          "inward = inward / np.linalg.norm(inward)\n"
-                          "along = np.array([-inward[1], inward[0]])\n"
-                          "spots = [target_xy + 0.015 * inward - 0.0375 * along, "
-                          "target_xy + 0.015 * inward + 0.0375 * along]\n"
-                          "for i, name in enumerate(block_names):\n"
-                          "    if i < 2:\n"
-                          "        put_first_on_second(name, spots[i])\n"
-                          "    else:\n"
-                          "        put_first_on_second(name, block_names[i - 2])\n")
+        return _BLOCKS + _corner_program(a['corner_side'])
     if template == 'blocks_in_bowl':
         return _BLOCKS + f"for name in block_names:\n    put_first_on_second(name, {a['bowl']!r})\n"
     if template == 'matching_bowls':
@@ -104,10 +93,50 @@ def oracle_program(episode: Episode) -> str:
     raise ValueError(f'no reference program for template {template!r}')
 
 
+def _corner_program(place: str) -> str:
+    # Two short stacks side by side, far enough apart (7.5 cm) that the open fingers clear the neighbour whichever
+    # way they close: every block within 0.045 m of the place, and no tower tall enough to topple. The pair stands
+    # across the line to the table's middle, 1.5 cm in from the place, so that at a corner neither block hangs over
+    # an edge. With a bowl's rim within reach of a spot, the pair is turned and shifted (on the table, still within
+    # 0.045 m) to where its spots keep farthest from the rims. The blocks nearest the place go first, so that none
+    # still stands on a spot when a block is set down there.
+    (x_low, x_high), (y_low, y_high) = ((low + _BLOCK_REACH, high - _BLOCK_REACH)
+                                        for low, high in (TABLE_X_RANGE, TABLE_Y_RANGE))
+    return (f"target_xy = {position_code(place)}\n"
+            "block_names = sorted(block_names, key=lambda name: np.linalg.norm(get_obj_pos(name) - target_xy))\n"
+            f"inward = np.array({list(table.SIDES['middle'])}) - target_xy\n"
+            "inward = inward / np.linalg.norm(inward)\n"
+            "along = np.array([-inward[1], inward[0]])\n"
+            "spots = [target_xy + 0.015 * inward - 0.0375 * along, target_xy + 0.015 * inward + 0.0375 * along]\n"
+            "bowl_xy = [get_obj_pos(name) for name in get_obj_names() if name.endswith('bowl')]\n"
+            "def room(pair):\n"
+            f"    return min([np.linalg.norm(spot - xy) - {BOWL_RIM_RADIUS:.3f} for spot in pair for xy in bowl_xy] "
+            "+ [1.0])\n"
+            f"if room(spots) < {_RIM_ROOM:.3f}:\n"
+            "    pairs = []\n"
+            "    for turn in np.radians(np.arange(-90, 91, 10)):\n"
+            "        turned = np.array([np.cos(turn) * along[0] - np.sin(turn) * along[1],\n"
+            "                           np.sin(turn) * along[0] + np.cos(turn) * along[1]])\n"
+            "        for shift_in in (0.0, 0.015, 0.03):\n"
+            "            for shift_along in (-0.015, 0.0, 0.015):\n"
+            "                centre = target_xy + shift_in * inward + shift_along * turned\n"
+            "                pair = [centre - 0.0375 * turned, centre + 0.0375 * turned]\n"
+            f"                if all({x_low:.3f} <= x <= {x_high:.3f} and {y_low:.3f} <= y <= {y_high:.3f} and "
+            "np.linalg.norm(np.array([x, y]) - target_xy) <= 0.045 for x, y in pair):\n"
+            "                    pairs.append(pair)\n"
+            "    spots = max([spots] + pairs, key=room)\n"
+            "for i, name in enumerate(block_names):\n"
+            "    if i < 2:\n"
+            "        put_first_on_second(name, spots[i])\n"
+            "    else:\n"
+            "        put_first_on_second(name, block_names[i - 2])\n")
+
+
 def _line_program(kind: str) -> str:
     # Blocks 0.1 m apart along the line. The line's centre (and, for a diagonal, which diagonal) is searched over
-    # the middle of the table for where its spots keep farthest from the objects as they stand, so that no block
-    # lands on a bowl's rim or on a block still waiting to be moved, and the fingers have room beside each spot.
+    # the middle of the table for where its spots keep farthest from the objects' footprints as they stand (a
+    # bowl's rim, a block's side), so that no block lands on a rim or on a block still waiting to be moved, and
+    # the fingers have room beside each spot.
     if kind == 'horizontal':
         directions = '[np.array([1.0, 0.0])]'
     elif kind == 'vertical':
@@ -115,9 +144,10 @@ def _line_program(kind: str) -> str:
     else:
         directions = '[np.array([1.0, 1.0]) / np.sqrt(2), np.array([1.0, -1.0]) / np.sqrt(2)]'
     return ("offsets = (np.arange(len(block_names)) - (len(block_names) - 1) / 2) * 0.1\n"
-            "others = np.array([get_obj_pos(name) for name in get_obj_names()])\n"
+            f"others = [(get_obj_pos(name), {BOWL_RIM_RADIUS:.3f} if name.endswith('bowl') else "
+            f"{BLOCK_SIZE / 2:.3f}) for name in get_obj_names()]\n"
             "def clearance(line):\n"
-            "    return np.min(np.linalg.norm(line[:, None, :] - others[None, :, :], axis=2))\n"
+            "    return min(np.linalg.norm(xy - pos) - radius for xy in line for pos, radius in others)\n"
             "candidates = [offsets[:, None] * direction + np.array([x, y])\n"
             f"              for direction in {directions}\n"
             "              for x in np.linspace(-0.1, 0.1, 11) for y in np.linspace(-0.6, -0.4, 11)]\n"

@@ -21,10 +21,12 @@ Workspace limits are enforced here whatever the caller asks, before anything mov
 message that names the target and what is allowed:
 - an object to pick outside the table bounds is refused;
 - a place that would leave any of the placed object over the table's edge is refused: its centre must lie within
-  the table less half its footprint and `edge_margin` (`allowed_target_range`), on the table or on the block or in
-  the bowl it goes onto;
+  the table less half its footprint and `edge_margin` (`allowed_target_range`), on the table or in the bowl it
+  goes into (on a block: within the table less half its footprint, as that block is);
 - a point of the table where the object would come down on another block is refused (it would slide off that
-  block's edge and end beside it, tilted): the caller names the block to stack onto instead.
+  block's edge and end beside it, tilted): the caller names the block to stack onto instead;
+- a point of the table where the object would come down on a bowl's rim moves clear of it, at most `rim_shift`
+  (it would slide off the rim's slope); the check after placing still measures from the point asked for.
 No TCP pose goes below the table's safety height. After the retreat, an object seen off the table (fallen), not
 resting on it where placed at a point, or farther from the target than the tolerance fails the pick-and-place with
 OBJECT_DROPPED and the reason, so the result matches where the object really is.
@@ -219,6 +221,10 @@ class PickPlaceConfig:
     # leaning on it, tilted.
     target_room: float = parameter(0.0, 'Room kept between a point target and the footprints of the other blocks '
                                    '[m] (0: not overlapping them).')
+    # Set down with its footprint on a bowl's sloping wall from outside, an object slides off outwards, 1.3-3.4 cm
+    # from the point (measured at full speed), or stays on the rim, tilted.
+    rim_shift: float = parameter(0.025, 'A point target where the object would come down on a bowl\'s rim moves at '
+                                 'most this far, to the nearest point clear of every rim [m] (0: never moved).')
     stack_radius: float = parameter(0.015, 'A point target this close to a block\'s centre means that block: the '
                                     'object is stacked on it (a program that places "at get_obj_pos(block)") [m].')
     resting_tolerance: float = parameter(0.015, 'Placed at a point, the object must rest on the table: its centre '
@@ -570,51 +576,103 @@ def footprint_half_extents(obj: ObjectInfo) -> tuple[float, float]:
     return x, y
 
 
-def allowed_target_range(obj: ObjectInfo, config: PickPlaceConfig) -> tuple[tuple[float, float],
-                                                                               tuple[float, float]]:
-    """The x and y ranges [m] of a place point that keep all of `obj` on the table, `edge_margin` to spare.
+def allowed_target_range(obj: ObjectInfo, config: PickPlaceConfig, margin: float | None = None
+                         ) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The x and y ranges [m] of a place point that keep all of `obj` on the table, `margin` (default:
+    `edge_margin`) to spare.
 
     Empty (low > high) when the object is too large for the table.
     """
     workspace = config.workspace
+    margin = config.edge_margin if margin is None else margin
     half_x, half_y = footprint_half_extents(obj)
-    reach_x, reach_y = half_x + config.edge_margin, half_y + config.edge_margin
+    reach_x, reach_y = half_x + margin, half_y + margin
     return (workspace.x_min + reach_x, workspace.x_max - reach_x), (workspace.y_min + reach_y,
                                                                     workspace.y_max - reach_y)
 
 
 def check_place_on_table(obj: ObjectInfo, place_xy: Sequence[float], config: PickPlaceConfig,
-                         support: str | None = None) -> None:
+                         support: ObjectInfo | None = None) -> None:
     """Raise OUTSIDE_WORKSPACE unless `obj`, placed with its centre at `place_xy`, lies wholly on the table.
 
-    `support` names what it would be placed on (None: the table at that point) for the message.
+    `support` is what it would be placed on (None: the table at that point). On a block the object rests on that
+    block, which is on the table already: the edge margin (room for the errors of a place on the table) is not
+    asked for again; a block set down at the margin's limit may end a few millimetres beyond it.
     """
-    (x_low, x_high), (y_low, y_high) = allowed_target_range(obj, config)
+    margin = 0.0 if support is not None and support.category != CATEGORY_BOWL else config.edge_margin
+    (x_low, x_high), (y_low, y_high) = allowed_target_range(obj, config, margin)
     x, y = float(place_xy[0]), float(place_xy[1])
     if x_low <= x <= x_high and y_low <= y <= y_high:
         return
     workspace = config.workspace
     half_x, half_y = footprint_half_extents(obj)
     point = f'({x:.3f}, {y:.3f})'
-    where = f'the target point {point}' if support is None else f'the {support} at {point}'
+    where = f'the target point {point}' if support is None else f'the {support.name} at {point}'
     why = 'is outside the workspace' if not workspace.contains_xy(x, y) else 'is too close to the table\'s edge'
+    room = f', and a {margin * 100:.1f} cm margin' if margin else ''
     raise PickPlaceError(
         PickPlaceErrorCode.OUTSIDE_WORKSPACE,
         f'cannot place the {obj.name} there: {where} {why}: the {obj.name} would not be wholly on the table. '
         f'Allowed for its centre: x in [{x_low:.3f}, {x_high:.3f}], y in [{y_low:.3f}, {y_high:.3f}] '
         f'(the table {workspace.describe()}, less half the {obj.name}\'s footprint, {half_x * 100:.1f} x '
-        f'{half_y * 100:.1f} cm, and a {config.edge_margin * 100:.1f} cm margin)')
+        f'{half_y * 100:.1f} cm{room})')
 
 
 def target_taken_by(obj: ObjectInfo, place_xy: Sequence[float], neighbours: Sequence[ObjectInfo],
                     config: PickPlaceConfig) -> ObjectInfo | None:
     """The block that `obj`, set down on the table with its centre at `place_xy`, would come down on, if any
     (footprints as in overlapping_at, `target_room` apart). Bowls are not in the way: a point inside one puts the
-    object into it, and a bowl's sloping wall pushes an object set down on the rim outwards onto the table beside
-    it (1.4-2.5 cm from the point, measured), which the check after placing judges.
+    object into it, and one by a bowl's rim moves clear of it (clear_of_bowl_rims).
     """
     blocks = [other for other in neighbours if other.name != obj.name and other.category != CATEGORY_BOWL]
     return next(iter(overlapping_at(obj, place_xy, blocks, config.target_room)), None)
+
+
+# [m] kept between a moved place's footprint and a bowl's rim (a rim of 12 flat wall segments reaches 2.5 mm
+# past its circle at their joints)
+RIM_GAP = 0.005
+RIM_SHIFT_STEP = 0.0025  # [m] between the rings of points tried
+RIM_SHIFT_DIRECTIONS = 24
+
+
+def clear_of_bowl_rims(obj: ObjectInfo, place_xy: tuple[float, float], neighbours: Sequence[ObjectInfo],
+                       config: PickPlaceConfig) -> tuple[tuple[float, float], ObjectInfo | None]:
+    """Where to set `obj` down for the point target `place_xy`, and the bowl whose rim moved it there (or None).
+
+    A point whose footprint would come within RIM_GAP of a bowl's rim moves to the nearest point, at most
+    `rim_shift` away, where the footprint clears every rim by RIM_GAP, stays on the table (allowed_target_range)
+    and meets no block;
+    with no such point it stays, and the check after placing judges where the object ends. A point with all of the
+    footprint within a rim's circle puts the object into that bowl and stays too.
+    """
+    bowls = [other for other in neighbours if other.category == CATEGORY_BOWL and other.name != obj.name]
+    half_x, half_y = footprint_half_extents(obj)
+
+    def gap(xy: Sequence[float], bowl: ObjectInfo) -> float:
+        # From the footprint (a world-axis box) to the rim's circle; negative where it reaches over the rim.
+        dx = max(abs(xy[0] - bowl.position[0]) - half_x, 0.0)
+        dy = max(abs(xy[1] - bowl.position[1]) - half_y, 0.0)
+        return math.hypot(dx, dy) - footprint_half_extents(bowl)[0]
+
+    # Wholly within a rim's circle, the object goes into that bowl.
+    if config.rim_shift <= 0 or any(math.dist(place_xy, bowl.position[:2]) + math.hypot(half_x, half_y)
+                                    <= footprint_half_extents(bowl)[0] for bowl in bowls):
+        return place_xy, None
+    reached = [bowl for bowl in bowls if gap(place_xy, bowl) < RIM_GAP]
+    if not reached:
+        return place_xy, None
+    (x_low, x_high), (y_low, y_high) = allowed_target_range(obj, config)
+    for ring in range(1, int(config.rim_shift / RIM_SHIFT_STEP + 1e-9) + 1):
+        radius = ring * RIM_SHIFT_STEP
+        candidates = [(place_xy[0] + radius * math.cos(angle), place_xy[1] + radius * math.sin(angle))
+                      for angle in np.linspace(0.0, 2 * math.pi, RIM_SHIFT_DIRECTIONS, endpoint=False)]
+        clear = [xy for xy in candidates if x_low <= xy[0] <= x_high and y_low <= xy[1] <= y_high
+                 and all(gap(xy, bowl) >= RIM_GAP for bowl in bowls)
+                 and target_taken_by(obj, xy, neighbours, config) is None]
+        if clear:  # the roomiest of the nearest
+            best = max(clear, key=lambda xy: min(gap(xy, bowl) for bowl in bowls))
+            return best, min(reached, key=lambda bowl: gap(place_xy, bowl))
+    return place_xy, None
 
 
 def overlapping_at(obj: ObjectInfo, place_xy: Sequence[float], others: Sequence[ObjectInfo],
@@ -703,7 +761,7 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     place_xy = target_xy if support is None else (float(support.position[0]), float(support.position[1]))
     # All of the placed object must be over the table (on a block or in a bowl near the edge too): an
     # overhanging one topples off, or the fingers push it off.
-    check_place_on_table(obj, place_xy, config, support.name if support is not None else None)
+    check_place_on_table(obj, place_xy, config, support)
     taken = target_taken_by(obj, place_xy, neighbours, config) if support is None else None
     at_point = [other for other in neighbours if other.category != CATEGORY_BOWL
                 and math.dist(place_xy, other.position[:2]) <= config.stack_radius]
@@ -713,7 +771,7 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
         support = target_object = taken
         place_xy = target_xy = (float(taken.position[0]), float(taken.position[1]))
         target_description = f'the {taken.name}'
-        check_place_on_table(obj, place_xy, config, taken.name)
+        check_place_on_table(obj, place_xy, config, taken)
         taken = None
     if support is None:
         if taken is not None:
@@ -723,6 +781,11 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
                 f'({taken.position[0]:.3f}, {taken.position[1]:.3f}) is in the way (the {obj.name} would '
                 f'come down on it and slide off, tilted). Choose a free spot, or put it on the {taken.name} by name')
     if support is None:
+        moved_xy, rim_of = clear_of_bowl_rims(obj, place_xy, neighbours, config)
+        if rim_of is not None:
+            target_description += (f', moved {math.dist(moved_xy, place_xy) * 100:.1f} cm to '
+                                   f'({moved_xy[0]:.3f}, {moved_xy[1]:.3f}), clear of the {rim_of.name}\'s rim')
+            place_xy = moved_xy
         place_z = table_z + held_below_tcp + config.place_clearance
     elif support.category == CATEGORY_BOWL:
         place_z = support.bottom + config.bowl_floor_thickness + held_below_tcp + config.place_clearance

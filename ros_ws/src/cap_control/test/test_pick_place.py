@@ -1,4 +1,5 @@
 """Pick-and-place plans: the right stages in the right order, safe heights, workspace limits, clear failures."""
+import dataclasses
 import math
 import re
 
@@ -12,7 +13,8 @@ from cap_control.kinematics import HOME_JOINTS, forward_kinematics, inverse_kine
 from cap_control.pick_place import (
     GripperStep, LiftCheck, ObjectInfo, Observation, PickPlaceConfig, PickPlaceError,
     PickPlaceErrorCode, PlacedCheck, StageName, TrajectoryStep, Workspace, allowed_target_range,
-    check_place_on_table, plan_pick_place, target_taken_by, yaw_of_quaternion,
+    check_place_on_table, clear_of_bowl_rims, footprint_half_extents, plan_pick_place, target_taken_by,
+    yaw_of_quaternion,
 )
 from cap_control.trajectory import UR5E_LIMITS, trajectory_tcp_positions
 
@@ -111,7 +113,8 @@ def test_set_down_by_a_bowl_the_descent_slows_above_its_rim():
     meets first), and the slow touch-down goes on from there to the table."""
     red = block('red block', 0.15, -0.45)
     blue = bowl('blue bowl', -0.1, -0.65)
-    plan = plan_pick_place(red, (-0.1, -0.565), HOME_JOINTS, neighbours=[blue])
+    # (With rim_shift the point would move clear of the rim: see the test below.)
+    plan = plan_pick_place(red, (-0.1, -0.565), HOME_JOINTS, PickPlaceConfig(rim_shift=0.0), neighbours=[blue])
     descent, place_step = stage(plan, StageName.PLACE).steps
     held_below_tcp = plan.grasp_z - red.bottom
     descent_end = forward_kinematics(descent.trajectory.end)[2, 3]
@@ -119,9 +122,55 @@ def test_set_down_by_a_bowl_the_descent_slows_above_its_rim():
     assert place_step.stop_on_contact
     assert forward_kinematics(place_step.trajectory.end)[2, 3] == pytest.approx(plan.place_z, abs=1e-6)
     # Away from the bowl, the descent ends just above the table as usual.
-    clear = plan_pick_place(red, (0.1, -0.55), HOME_JOINTS, neighbours=[blue])
+    clear = plan_pick_place(red, (0.1, -0.55), HOME_JOINTS, PickPlaceConfig(rim_shift=0.0), neighbours=[blue])
     clear_end = forward_kinematics(stage(clear, StageName.PLACE).steps[0].trajectory.end)[2, 3]
     assert clear_end == pytest.approx(clear.place_z + clear.config.touchdown_height, abs=1e-6)
+
+
+def rim_gap(obj: ObjectInfo, xy, bowl_info: ObjectInfo) -> float:
+    half_x, half_y = footprint_half_extents(obj)
+    dx = max(abs(xy[0] - bowl_info.position[0]) - half_x, 0.0)
+    dy = max(abs(xy[1] - bowl_info.position[1]) - half_y, 0.0)
+    return math.hypot(dx, dy) - footprint_half_extents(bowl_info)[0]
+
+
+def test_a_point_whose_block_would_come_down_on_a_bowls_rim_moves_just_clear_of_it():
+    """Set down reaching over a rim, a block slides off it: the place moves (at most rim_shift) to the nearest point
+    where the block's footprint clears the rim, the check after placing still judges it against the point asked
+    for, and the log says where it went."""
+    red = block('red block', 0.15, -0.45)
+    blue = bowl('blue bowl', -0.1, -0.65)
+    asked = (-0.1, -0.565)
+    assert rim_gap(red, asked, blue) < 0
+    plan = plan_pick_place(red, asked, HOME_JOINTS, neighbours=[blue])
+    placed = forward_kinematics(stage(plan, StageName.PLACE).steps[-1].trajectory.end)[:2, 3]
+    shift = math.dist(placed, asked)
+    assert 0 < shift <= plan.config.rim_shift
+    assert rim_gap(red, placed, blue) >= 0.0049
+    assert 'clear of the blue bowl\'s rim' in plan.target_description
+    placed_check = stage(plan, StageName.RETREAT).checks[0]
+    assert tuple(placed_check.target_xy) == asked
+    # Clear of the rim, the descent is fast down to the table.
+    descent_end = forward_kinematics(stage(plan, StageName.PLACE).steps[0].trajectory.end)[2, 3]
+    assert descent_end == pytest.approx(plan.place_z + plan.config.touchdown_height, abs=1e-6)
+
+
+def test_a_point_inside_a_bowl_or_without_a_clear_point_near_it_stays():
+    red = block('red block', 0.15, -0.45)
+    blue = bowl('blue bowl', -0.1, -0.65)
+    config = PickPlaceConfig()
+    inside = (-0.1, -0.63)  # all of the block within the rim: into the bowl
+    assert clear_of_bowl_rims(red, inside, [blue], config) == (inside, None)
+    # Between two bowls 15 cm apart there is no point within 2 cm clear of both rims.
+    green = bowl('green bowl', -0.1, -0.5)
+    between = (-0.1, -0.575)
+    assert clear_of_bowl_rims(red, between, [blue, green], config) == (between, None)
+    # Near a table edge the moved point stays where the whole block is on the table.
+    edge_bowl = bowl('edge bowl', -0.15, -0.3)
+    asked = (-0.08, -0.24)
+    moved, rim_of = clear_of_bowl_rims(red, asked, [edge_bowl], config)
+    (x_low, x_high), (y_low, y_high) = allowed_target_range(red, config)
+    assert rim_of is edge_bowl and y_low <= moved[1] <= y_high and x_low <= moved[0] <= x_high
 
 
 def test_a_block_goes_into_a_bowl_squarely_on_top_of_the_blocks_already_there():
@@ -255,6 +304,16 @@ def test_stacking_onto_a_block_that_overhangs_the_edge_is_refused():
     with pytest.raises(PickPlaceError, match='the green block at \\(0.285, -0.500\\) is too close') as raised:
         plan_pick_place(block('red block', 0.0, -0.5), near_edge, HOME_JOINTS)
     assert raised.value.code == PickPlaceErrorCode.OUTSIDE_WORKSPACE
+
+
+def test_stacking_onto_a_block_within_the_edge_margin_is_accepted():
+    """A block set down at the margin's limit may end a few millimetres beyond it; one stacked on it rests on
+    that block, so only the block being wholly on the table counts."""
+    past_margin = block('green block', -0.2, -0.225)  # 5 mm past the margin, 5 mm from being over the edge
+    plan = plan_pick_place(block('red block', 0.0, -0.5), past_margin, HOME_JOINTS)
+    assert plan.target_description == 'the green block'
+    with pytest.raises(PickPlaceError, match='the target point \\(-0.200, -0.225\\) is too close'):
+        plan_pick_place(block('red block', 0.0, -0.5), (-0.2, -0.225), HOME_JOINTS)  # on the table: the margin
 
 
 def test_a_point_target_on_another_block_is_refused_naming_it_and_one_in_a_bowl_is_not():
