@@ -144,10 +144,11 @@ def _line_program(kind: str) -> str:
     else:
         directions = '[np.array([1.0, 1.0]) / np.sqrt(2), np.array([1.0, -1.0]) / np.sqrt(2)]'
     return ("offsets = (np.arange(len(block_names)) - (len(block_names) - 1) / 2) * 0.1\n"
-            f"others = [(get_obj_pos(name), {BOWL_RIM_RADIUS:.3f} if name.endswith('bowl') else "
-            f"{BLOCK_SIZE / 2:.3f}) for name in get_obj_names()]\n"
+            "others = np.array([get_obj_pos(name) for name in get_obj_names()])\n"
+            f"radii = np.array([{BOWL_RIM_RADIUS:.3f} if name.endswith('bowl') else {BLOCK_SIZE / 2:.3f} "
+            "for name in get_obj_names()])\n"
             "def clearance(line):\n"
-            "    return min(np.linalg.norm(xy - pos) - radius for xy in line for pos, radius in others)\n"
+            "    return np.min(np.linalg.norm(line[:, None, :] - others[None, :, :], axis=2) - radii[None, :])\n"
             "candidates = [offsets[:, None] * direction + np.array([x, y])\n"
             f"              for direction in {directions}\n"
             "              for x in np.linspace(-0.1, 0.1, 11) for y in np.linspace(-0.6, -0.4, 11)]\n"

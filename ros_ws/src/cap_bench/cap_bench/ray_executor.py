@@ -3,9 +3,9 @@
 Why Ray: spreading a run over machines is a distributed engine's work (placing tasks where CPUs are free, streaming
 results back, cancelling); Ray is an established one, so the project keeps no engine of its own.
 
-Job i of the run (its share of the episodes, as the local executor deals them) is one Ray task. Like the local
-executor's worker process, the task brings up a graph of its own on ROS_DOMAIN_ID first + i, runs its episodes one
-after another on it, and sends each episode's record back as it ends (a Ray generator task). The driver writes the
+Job i of the run is one Ray task. Like the local executor's worker process, the task brings up a graph of its own
+on ROS_DOMAIN_ID first + i, takes the run's episodes one at a time from a queue that every job shares (a Ray queue
+actor), runs each on its graph and sends its record back as it ends (a Ray generator task). The driver writes the
 records to episodes-<i>.jsonl in --out, so --resume and the report are the local executor's. The ids are distinct
 across the run, hence among the tasks that share a machine; DDS discovery stays on each machine's loopback
 (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), so graphs on different machines never meet whatever their ids.
@@ -35,9 +35,9 @@ from cap_bench.runner import BenchOptions, EpisodeGraph, _EpisodeRunner, write_r
 CANCEL_TIMEOUT_S = 30.0  # for a cancelled task to close its graph before it is killed
 
 
-def _run_job(index: int, keys: Sequence[str], options: BenchOptions, cassette_text: str | None,
-             domain_id: int) -> Iterator[dict]:
-    """In a Ray worker: bring up a graph and yield the record of each episode of `keys`."""
+def _run_job(index: int, keys, options: BenchOptions, cassette_text: str | None, domain_id: int) -> Iterator[dict]:
+    """In a Ray worker: bring up a graph and yield the record of each episode it takes from the run's queue `keys`
+    (a ray.util.queue.Queue), until it takes None."""
     # Before rclpy starts: a DDS domain of this job's own, discovery on this machine's loopback only.
     os.environ['ROS_DOMAIN_ID'] = str(domain_id)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -51,7 +51,7 @@ def _run_job(index: int, keys: Sequence[str], options: BenchOptions, cassette_te
         # Pinned to CPU i of this machine (modulo its CPUs), as local job i is (see cap_bringup.cpu_affinity).
         graph = EpisodeGraph(options, lambda: _EpisodeRunner(options, cassette, cpu=index))
         try:
-            for key in keys:
+            for key in iter(keys.get, None):
                 yield graph.run(key)
         finally:  # also on cancellation (KeyboardInterrupt raised in the task)
             graph.close()
@@ -82,20 +82,30 @@ def start(address: str, jobs: int) -> ModuleType:
     return ray
 
 
-def run_jobs(shards: Sequence[Sequence[str]], options: BenchOptions, cassette: pathlib.Path | None,
+def run_jobs(keys: Sequence[str], jobs: int, options: BenchOptions, cassette: pathlib.Path | None,
              out_dir: pathlib.Path, count: Callable[[bool], None]) -> None:
-    """Run job i's episodes `shards[i]` as a Ray task, writing each record to out_dir/episodes-<i>.jsonl and
-    counting it with `count(success)`; raise RuntimeError naming the jobs that failed."""
-    ray = start(options.ray_address, len(shards))
+    """Run the episodes `keys` on `jobs` Ray tasks, each taking the next episode from one queue when it is free,
+    writing each record of job i to out_dir/episodes-<i>.jsonl and counting it with `count(success)`; raise
+    RuntimeError naming the jobs that failed."""
+    ray = start(options.ray_address, jobs)
+    from ray.util.queue import Queue  # after start(): it makes an actor on the cluster
+
     # One CPU per job; a fresh worker process for each (max_calls=1: no rclpy state carried from one job to another);
     # no retry, which would run a failed job's episodes again (--resume does that, for the episodes without a record).
     job = ray.remote(num_cpus=1, max_calls=1, max_retries=0)(_run_job)
+    queued = None
     try:
+        # The queue is an actor holding only the keys (no CPU of its own: every CPU is for a job). Machines and
+        # episodes differ in speed; a job that is free takes the next episode, as the local executor's jobs do.
+        queued = Queue(actor_options={'num_cpus': 0})
+        queued.put_nowait_batch(list(keys) + [None] * jobs)  # one end mark per job
         cassette_text = cassette.read_text(encoding='utf-8') if cassette else None
-        streams = {job.remote(i, keys, options, cassette_text, options.first_domain_id + i): i
-                   for i, keys in enumerate(shards) if keys}
+        streams = {job.remote(i, queued, options, cassette_text, options.first_domain_id + i): i
+                   for i in range(jobs)}
         failures = _collect(ray, streams, out_dir, count)
     finally:
+        if queued is not None:
+            queued.shutdown(force=True)  # on a joined cluster it would outlive the run
         ray.shutdown()  # stops the instance this run started; leaves a joined cluster running
     if failures:
         raise RuntimeError(f'{len(failures)} benchmark job(s) failed ({"; ".join(failures)}). '

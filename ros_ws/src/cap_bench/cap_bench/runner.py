@@ -439,7 +439,7 @@ def run_benchmark(options: BenchOptions, show_progress: bool = True) -> dict:
             if options.executor == 'ray':
                 from cap_bench import ray_executor  # only here: the local executor never loads Ray
 
-                ray_executor.run_jobs([keys[i::jobs] for i in range(jobs)], options, cassette, out_dir, count)
+                ray_executor.run_jobs(keys, jobs, options, cassette, out_dir, count)
             else:
                 _run_local(keys, jobs, options, cassette, out_dir, count)
     records = [r for r in load_records(out_dir)
