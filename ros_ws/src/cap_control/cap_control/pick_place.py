@@ -641,9 +641,8 @@ def clear_of_bowl_rims(obj: ObjectInfo, place_xy: tuple[float, float], neighbour
 
     A point whose footprint would come within RIM_GAP of a bowl's rim moves to the nearest point, at most
     `rim_shift` away, where the footprint clears every rim by RIM_GAP, stays on the table (allowed_target_range)
-    and meets no block;
-    with no such point it stays, and the check after placing judges where the object ends. A point with all of the
-    footprint within a rim's circle puts the object into that bowl and stays too.
+    and meets no block; with no such point it stays, and the check after placing judges where the object ends. A
+    point with all of the footprint within a rim's circle puts the object into that bowl and stays too.
     """
     bowls = [other for other in neighbours if other.category == CATEGORY_BOWL and other.name != obj.name]
     half_x, half_y = footprint_half_extents(obj)
