@@ -1,5 +1,4 @@
 """Pick-and-place plans: the right stages in the right order, safe heights, workspace limits, clear failures."""
-import dataclasses
 import math
 import re
 
