@@ -236,7 +236,7 @@ class _EpisodeRunner:
 
     def __init__(self, options: BenchOptions, cassette: pathlib.Path | None, cpu: int = 0) -> None:
         import rclpy
-        from rclpy.action import ActionClient
+        from cap_ros_common.actions import ActionClient
         from rclpy.context import Context
         from std_srvs.srv import Trigger
 

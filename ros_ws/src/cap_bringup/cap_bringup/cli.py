@@ -175,7 +175,7 @@ def send(command: str, server_timeout: float, timeout: float, out=None, namespac
     result); `server_timeout` [s] bounds finding lmp_node and the acknowledgement. When the time is up, or on
     SIGINT/SIGTERM, the command asks lmp_node to cancel (waiting at most CANCEL_GRACE_S) and ends.
     """
-    from rclpy.action import ActionClient
+    from cap_ros_common.actions import ActionClient
     from std_msgs.msg import String
 
     from cap_interfaces.action import ExecuteCommand

@@ -167,7 +167,7 @@ def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '
     """Run the demo; return the summary (also written to out_dir/summary.json)."""
     import rclpy
     from geometry_msgs.msg import Point
-    from rclpy.action import ActionClient
+    from cap_ros_common.actions import ActionClient
     from rclpy.context import Context
     from std_msgs.msg import String
 

@@ -118,7 +118,7 @@ def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '
     import cv2
     import rclpy
     from geometry_msgs.msg import Point
-    from rclpy.action import ActionClient
+    from cap_ros_common.actions import ActionClient
     from rclpy.context import Context
     from std_msgs.msg import String
 

@@ -23,7 +23,8 @@ from typing import Any, Callable
 
 import rclpy
 from cap_ros_common.time import to_seconds
-from rclpy.action import ActionClient, CancelResponse, GoalResponse
+from rclpy.action import CancelResponse, GoalResponse
+from cap_ros_common.actions import ActionClient
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor

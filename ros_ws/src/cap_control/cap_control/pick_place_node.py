@@ -13,7 +13,8 @@ from concurrent.futures import Future
 
 from cap_ros_common.actions import RESULT_TIMEOUT_S
 from cap_ros_common.parameters import declare_config
-from rclpy.action import ActionClient, ActionServer
+from rclpy.action import ActionServer
+from cap_ros_common.actions import ActionClient
 from rclpy.callback_groups import ReentrantCallbackGroup
 
 from cap_control import ros_conversions as conv

@@ -22,7 +22,7 @@ from typing import Any, Sequence
 import numpy as np
 import rclpy
 from geometry_msgs.msg import Vector3
-from rclpy.action import ActionClient
+from cap_ros_common.actions import ActionClient
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 

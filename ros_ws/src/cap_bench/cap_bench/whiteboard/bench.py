@@ -68,7 +68,7 @@ class WhiteboardRunner:
 
     def __init__(self, options: BenchOptions, cassette: pathlib.Path | None) -> None:
         import rclpy
-        from rclpy.action import ActionClient
+        from cap_ros_common.actions import ActionClient
         from rclpy.context import Context
         from std_srvs.srv import Trigger
 

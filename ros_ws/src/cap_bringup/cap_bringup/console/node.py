@@ -19,7 +19,7 @@ import time
 from typing import Any, Callable
 
 import rclpy
-from rclpy.action import ActionClient
+from cap_ros_common.actions import ActionClient
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy

@@ -9,7 +9,7 @@ import threading
 import time
 from typing import Any, Callable
 
-from rclpy.action import ActionClient
+from cap_ros_common.actions import ActionClient
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python

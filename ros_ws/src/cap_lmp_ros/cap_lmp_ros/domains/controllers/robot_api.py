@@ -17,7 +17,7 @@ import time
 from typing import Any, Callable
 
 import numpy as np
-from rclpy.action import ActionClient
+from cap_ros_common.actions import ActionClient
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from std_msgs.msg import String

@@ -11,7 +11,7 @@ from typing import Any, Callable
 
 import numpy as np
 from geometry_msgs.msg import Point
-from rclpy.action import ActionClient
+from cap_ros_common.actions import ActionClient
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
