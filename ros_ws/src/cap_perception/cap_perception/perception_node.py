@@ -1,7 +1,8 @@
 """perception_node: the object services of the graph over one interchangeable source.
 
 The `source` parameter chooses where objects come from: `ground_truth` (the simulator's object array), `rgbd` (the
-colour detector on one camera's colour and depth images) or `stub` (a YAML file).
+colour detector on one camera's colour and depth images, run on the newest frame when a service is asked) or `stub`
+(a YAML file).
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from cap_interfaces.srv import GetObjectNames, GetObjectState
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.time import time_msg, to_seconds
 from cap_perception.config import PerceptionConfig
-from cap_perception.rgbd_detector import CameraView, DetectorConfig, detect
+from cap_perception.rgbd_detector import CameraView, DetectorConfig, detect, same_view
 from cap_perception.ros_conversions import from_msg, image_to_array, to_msg
 from cap_perception.sources import (CameraMemory, NoObservationError, SnapshotSource, UnknownObjectError,
                                     load_stub_objects)
@@ -54,7 +55,8 @@ class PerceptionNode(Node):
             self.create_subscription(ObjectArray, GraphNames.SIM_OBJECTS_TOPIC, self._on_objects, OBJECTS_QOS)
         else:
             self._start_detector()
-        # Services answer from the latest snapshot; their own group keeps them responsive while a frame is analysed.
+        # Services answer from the latest snapshot (with the RGB-D source, the newest frame is analysed first); their
+        # own group keeps them apart from the image callbacks, which only keep the newest frame.
         services = MutuallyExclusiveCallbackGroup()
         self.create_service(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE, self._on_names,
                             callback_group=services)
@@ -75,7 +77,8 @@ class PerceptionNode(Node):
         position, orientation = config.camera_position, config.camera_orientation
         self._world_from_optical = None if use_pose_topic else _pose_matrix(position, orientation)
         self._detector_config = DetectorConfig()
-        self._memory = CameraMemory(self.source)
+        self._memory = CameraMemory(self.source, analyse=self._analyse)
+        self._last_analysis: tuple[CameraView, list] | None = None  # only touched inside CameraMemory.refresh
         self._frames_lock = threading.Lock()
         self._color: Image | None = None
         self._depth: Image | None = None
@@ -112,21 +115,32 @@ class PerceptionNode(Node):
             setattr(self, f'_{kind}_received_ns', int(info.get('received_timestamp') or 0))
             color, depth = self._color, self._depth
             received_ns = min(self._color_received_ns, self._depth_received_ns)
-        # Colour and depth of one frame carry the same stamp; analyse each frame once.
-        if (color is None or depth is None or self._camera_matrix is None or self._world_from_optical is None
-                or color.header.stamp != depth.header.stamp):
+        # Colour and depth of one frame carry the same stamp: offer the pair, analysed when somebody asks.
+        if color is None or depth is None or color.header.stamp != depth.header.stamp:
             return
-        stamp = to_seconds(color.header.stamp)
-        token = self._memory.begin(stamp, received_ns or None)
-        if token is None:
-            return
+        self._memory.offer((color, depth), to_seconds(color.header.stamp), received_ns or None)
+
+    def _analyse(self, frame: tuple[Image, Image]) -> list | None:
+        """The objects in one colour and depth pair (None when it cannot be analysed yet or at all).
+
+        A frame identical to the last one analysed (the world at rest: the simulator sends the same image with new
+        stamps) has the same objects: they are reused rather than detected again.
+        """
+        if self._camera_matrix is None or self._world_from_optical is None:
+            return None
+        color, depth = frame
         try:
             view = CameraView(image_to_array(color), image_to_array(depth), self._camera_matrix,
                               self._world_from_optical)
         except ValueError as error:
             self.get_logger().error(str(error), throttle_duration_sec=5.0)
-            return
-        self._memory.record(token, stamp, detect(view, self._detector_config))
+            return None
+        last = self._last_analysis
+        if last is not None and same_view(last[0], view):
+            return last[1]
+        detected = detect(view, self._detector_config)
+        self._last_analysis = (view, detected)
+        return detected
 
     # ------------------------------------------------------------------------------------------ services
     def _on_forget(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:

@@ -15,6 +15,7 @@ under another is not detected; the perception source keeps it as not visible at 
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -51,20 +52,41 @@ class CameraView:
     world_from_optical: np.ndarray  # 4x4 pose of the ROS optical frame in the world frame
 
 
+def same_view(a: CameraView, b: CameraView) -> bool:
+    """Whether two frames show the same pixels from the same pose (so detect gives the same objects)."""
+    return (np.array_equal(a.world_from_optical, b.world_from_optical)
+            and np.array_equal(a.camera_matrix, b.camera_matrix)
+            and np.array_equal(a.rgb, b.rgb) and np.array_equal(a.depth, b.depth, equal_nan=True))
+
+
 _PALETTE_NAMES = tuple(PALETTE)
 _PALETTE_CHROMA = np.array([np.array(rgb, dtype=float) / max(rgb) for rgb in PALETTE.values()])
 
 
 def deproject(view: CameraView) -> tuple[np.ndarray, np.ndarray]:
     """World points (H, W, 3) of every pixel and the mask of pixels with a valid depth."""
-    height, width = view.depth.shape
-    k = view.camera_matrix
-    u, v = np.meshgrid(np.arange(width, dtype=np.float32), np.arange(height, dtype=np.float32))
     z = np.nan_to_num(view.depth.astype(np.float32), nan=0.0)
     valid = z > 0
-    optical = np.stack([(u - k[0, 2]) * z / k[0, 0], (v - k[1, 2]) * z / k[1, 1], z], axis=-1)
-    rotation, translation = view.world_from_optical[:3, :3], view.world_from_optical[:3, 3]
-    return optical @ rotation.T.astype(np.float32) + translation.astype(np.float32), valid
+    rays = _world_rays(view.camera_matrix, view.world_from_optical[:3, :3], z.shape)
+    return z[..., None] * rays + view.world_from_optical[:3, 3].astype(np.float32), valid
+
+
+@functools.lru_cache(maxsize=4)
+def _cached_rays(k: bytes, rotation: bytes, shape: tuple[int, int]) -> np.ndarray:
+    k_matrix, rotation_matrix = np.frombuffer(k).reshape(3, 3), np.frombuffer(rotation).reshape(3, 3)
+    height, width = shape
+    u, v = np.meshgrid(np.arange(width, dtype=np.float32), np.arange(height, dtype=np.float32))
+    optical = np.stack([(u - k_matrix[0, 2]) / k_matrix[0, 0], (v - k_matrix[1, 2]) / k_matrix[1, 1],
+                        np.ones_like(u)], axis=-1)
+    rays = optical @ rotation_matrix.T.astype(np.float32)
+    rays.flags.writeable = False
+    return rays
+
+
+def _world_rays(k: np.ndarray, rotation: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """World direction of each pixel's ray per metre of depth: the same for every frame of a fixed camera."""
+    return _cached_rays(np.ascontiguousarray(k, dtype=float).tobytes(),
+                        np.ascontiguousarray(rotation, dtype=float).tobytes(), tuple(shape))
 
 
 def label_colors(pixels: np.ndarray, config: DetectorConfig) -> np.ndarray:
@@ -72,9 +94,11 @@ def label_colors(pixels: np.ndarray, config: DetectorConfig) -> np.ndarray:
     pixels = pixels.astype(np.float32)
     brightest = pixels.max(axis=-1, keepdims=True)
     chroma = pixels / np.maximum(brightest, 1.0)
-    distances = np.linalg.norm(chroma[:, None, :] - _PALETTE_CHROMA[None], axis=-1)
-    labels = distances.argmin(axis=-1)
-    usable = (distances.min(axis=-1) <= config.max_color_distance) & (brightest[:, 0] >= config.min_brightness)
+    difference = chroma[:, None, :] - _PALETTE_CHROMA[None]
+    squared = np.einsum('ijk,ijk->ij', difference, difference)  # squared distances: no square root per pixel
+    labels = squared.argmin(axis=-1)
+    nearest = np.take_along_axis(squared, labels[:, None], axis=-1)[:, 0]
+    usable = (nearest <= config.max_color_distance ** 2) & (brightest[:, 0] >= config.min_brightness)
     return np.where(usable, labels, -1)
 
 
@@ -86,18 +110,28 @@ def detect(view: CameraView, config: DetectorConfig = DetectorConfig()) -> list[
                 & (x > config.table_x[0]) & (x < config.table_x[1])
                 & (y > config.table_y[0]) & (y < config.table_y[1]))
     # Colour only the pixels standing on the table: a few percent of the image.
-    labels = np.full(on_table.shape, -1, dtype=np.int64)
-    labels[on_table] = label_colors(view.rgb[on_table], config)
+    rows, columns = np.nonzero(on_table)
+    labels = label_colors(view.rgb[rows, columns], config)
+    height, width = on_table.shape
     found: list[PerceivedObject] = []
     for index, color in enumerate(_PALETTE_NAMES):
-        mask = (labels == index).astype(np.uint8)
-        if mask.sum() < config.min_pixels:
+        chosen = labels == index
+        if np.count_nonzero(chosen) < config.min_pixels:
             continue
+        # Work in the window around this colour's pixels (with a margin the 3x3 opening needs), not the image.
+        r, c = rows[chosen], columns[chosen]
+        top, left = max(int(r.min()) - 2, 0), max(int(c.min()) - 2, 0)
+        bottom, right = min(int(r.max()) + 3, height), min(int(c.max()) + 3, width)
+        mask = np.zeros((bottom - top, right - left), np.uint8)
+        mask[r - top, c - left] = 1
         # Opening removes single stray pixels (edges blending two colours) before grouping.
-        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-        for cluster in _objects_of_one_color(mask, points, config):
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _OPENING)
+        for cluster in _objects_of_one_color(mask, points[top:bottom, left:right], config):
             found.extend(_classify(color, cluster, config))
     return sorted(found, key=lambda obj: obj.name)
+
+
+_OPENING = np.ones((3, 3), np.uint8)
 
 
 def _objects_of_one_color(mask: np.ndarray, points: np.ndarray, config: DetectorConfig) -> list[np.ndarray]:
@@ -107,7 +141,9 @@ def _objects_of_one_color(mask: np.ndarray, points: np.ndarray, config: Detector
     for region in range(1, count):
         if stats[region, cv2.CC_STAT_AREA] < config.min_pixels:
             continue
-        cloud = points[regions == region]
+        left, top, width, height = stats[region, :4]
+        window = (slice(top, top + height), slice(left, left + width))
+        cloud = points[window][regions[window] == region]
         for i, group in enumerate(groups):
             if _xy_gap(group, cloud) < config.join_distance:
                 groups[i] = np.vstack([group, cloud])

@@ -9,7 +9,7 @@ import dataclasses
 import pathlib
 import threading
 import time
-from typing import Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import yaml
 from cap_tabletop.objects import BLOCK_SIZE
@@ -25,11 +25,13 @@ class NoObservationError(RuntimeError):
 class SnapshotSource:
     """Holds the latest full list of objects; fed by whoever observes the world (ground truth, a detector).
 
-    Thread-safe: the node's subscription callbacks update it while service callbacks read it.
+    Thread-safe: the node's subscription callbacks update it while service callbacks read it. `refresh`, when
+    set, is called before every read: a source that observes on demand (CameraMemory) brings itself up to date there.
     """
 
-    def __init__(self, description: str) -> None:
+    def __init__(self, description: str, refresh: Callable[[], None] | None = None) -> None:
         self.description = description
+        self.refresh = refresh
         self._lock = threading.Lock()
         self._objects: dict[str, PerceivedObject] | None = None
         self._stamp = 0.0
@@ -47,13 +49,19 @@ class SnapshotSource:
     @property
     def stamp(self) -> float:
         """Time [s] of the latest observation (simulated time when the graph runs on /clock)."""
+        self._refresh()
         with self._lock:
             return self._stamp
+
+    def _refresh(self) -> None:
+        if self.refresh is not None:
+            self.refresh()
 
     def _snapshot(self) -> dict[str, PerceivedObject]:
         return self._stamped_snapshot()[0]
 
     def _stamped_snapshot(self) -> tuple[dict[str, PerceivedObject], float]:
+        self._refresh()
         with self._lock:
             objects, stamp = self._objects, self._stamp
         if objects is None:
@@ -75,6 +83,7 @@ class SnapshotSource:
 
     def objects(self) -> list[PerceivedObject]:
         """Every object of the latest snapshot (empty before the first observation)."""
+        self._refresh()
         with self._lock:
             return list(self._objects.values()) if self._objects else []
 
@@ -91,31 +100,66 @@ def remember_unseen(previous: Iterable[PerceivedObject], seen: Iterable[Perceive
 
 
 class CameraMemory:
-    """Feeds a SnapshotSource from camera frames: each frame's objects plus those it no longer sees.
+    """Feeds a SnapshotSource from camera frames: each analysed frame's objects plus those it no longer sees.
+
+    Frames are analysed on demand: `offer` keeps the newest frame (cheap, at the camera's rate) and the source's
+    readers call `refresh`, which analyses that frame if it is newer than the last one analysed. A detector costs
+    several times the physics per frame; analysing every frame of a 10 Hz camera made it the slowest part of the
+    graph, while only the frames somebody asks about are needed. Readers therefore always get the newest frame.
 
     Objects do not vanish when occluded (remember_unseen). `forget()` (after a scene reset) clears them, and must not
     let frames of the old scene back in:
     - a frame received before the forget (still queued when it came) is dropped: `begin` takes the time the frame
       reached this process on the local wall clock, which the forget is compared against;
     - an analysis begun before the forget is dropped (each forget starts a new generation);
-    - as a second guard, frames within `settle_s` of frame time after the first accepted one, and the first frame
-      past that, replace the objects instead of adding to them.
-    The replacing window is bounded in frame time, not in frames: counted in analysed frames it stretched over
-    seconds of a slow detector's time, and a frame taken while the arm hid an object then dropped that object.
+    - as a second guard, frames within `settle_s` of frame time after the first accepted one replace the objects
+      instead of adding to them.
+    The replacing window is bounded in frame time, not in frames, and no frame past it replaces: frames are analysed
+    when asked for, so the next one can come at any moment of a task, e.g. while the gripper hides the block it
+    holds, and replacing would then drop that block.
     Thread-safe.
     """
 
     def __init__(self, source: SnapshotSource, settle_s: float = 1.0,
-                 wall_clock_ns: Callable[[], int] = time.time_ns) -> None:
+                 wall_clock_ns: Callable[[], int] = time.time_ns,
+                 analyse: Callable[[Any], Sequence[PerceivedObject] | None] | None = None) -> None:
         self.source = source
         self.settle_s = settle_s
         self._wall_clock_ns = wall_clock_ns
+        self._analyse = analyse
         self._lock = threading.Lock()
+        self._analysing = threading.Lock()  # one analysis at a time; readers meanwhile wait for its result
+        self._newest: tuple[Any, float, int | None] | None = None  # (frame, stamp, received_ns)
+        self._known: list[PerceivedObject] = []
         self._last_stamp = -1.0
         self._generation = 0
         self._forgot_at_ns = 0
         self._replace_until: float | None = None
-        self._settling = True
+        if analyse is not None:
+            source.refresh = self.refresh
+
+    def offer(self, frame: Any, stamp: float, received_ns: int | None = None) -> None:
+        """Keep `frame` (stamped `stamp`, received at local wall time `received_ns`) for the next `refresh`."""
+        with self._lock:
+            if self._newest is None or stamp > self._newest[1]:
+                self._newest = (frame, stamp, received_ns)
+
+    def refresh(self) -> None:
+        """Analyse the newest offered frame unless it was analysed already (or is from before a forget)."""
+        if self._analyse is None:
+            return
+        with self._analysing:
+            with self._lock:
+                newest = self._newest
+            if newest is None:
+                return
+            frame, stamp, received_ns = newest
+            token = self.begin(stamp, received_ns)
+            if token is None:
+                return
+            detected = self._analyse(frame)
+            if detected is not None:
+                self.record(token, stamp, detected)
 
     def begin(self, stamp: float, received_ns: int | None = None) -> int | None:
         """A token for analysing the frame stamped `stamp` (received at local wall time `received_ns`, if known),
@@ -133,13 +177,13 @@ class CameraMemory:
         with self._lock:
             if token != self._generation:
                 return  # analysed a frame from before a forget
-            if self._settling:
-                if self._replace_until is None:
-                    self._replace_until = stamp + self.settle_s
-                self._settling = stamp < self._replace_until
-                self.source.update(detected, stamp)
+            if self._replace_until is None:
+                self._replace_until = stamp + self.settle_s
+            if stamp < self._replace_until:
+                self._known = list(detected)
             else:
-                self.source.update(remember_unseen(self.source.objects(), detected), stamp)
+                self._known = remember_unseen(self._known, detected)
+            self.source.update(self._known, stamp)
 
     def forget(self) -> None:
         """Forget every object; answers wait for the next frame received after this call."""
@@ -147,7 +191,8 @@ class CameraMemory:
             self._generation += 1
             self._forgot_at_ns = self._wall_clock_ns()
             self._replace_until = None
-            self._settling = True
+            self._known = []
+            self._newest = None
             self.source.clear()
 
 

@@ -1,4 +1,6 @@
 """Object names as users type them, and the sources behind the perception services."""
+import dataclasses
+
 import pytest
 
 from cap_perception.names import UnknownObjectError, canonical_name, resolve_name
@@ -99,7 +101,7 @@ def test_frames_of_the_old_scene_leave_nothing_behind_after_a_forget():
 
 
 def test_after_a_forget_only_a_short_stretch_of_frame_time_replaces_the_objects():
-    # A slow detector analyses every fourth frame or so: a window counted in frames would last seconds, and a
+    # Frames are analysed when asked for: a window counted in frames would last as long as nobody asks, and a
     # frame taken while the arm carries or hides a block would drop that block.
     red = PerceivedObject.from_fields('red', 'block', (0.0, -0.4, 0.02), (0.04,) * 3)
     blue = PerceivedObject.from_fields('blue', 'block', (0.1, -0.6, 0.02), (0.04,) * 3)
@@ -108,6 +110,30 @@ def test_after_a_forget_only_a_short_stretch_of_frame_time_replaces_the_objects(
     memory.record(memory.begin(10.0), 10.0, [red, blue])
     memory.record(memory.begin(10.5), 10.5, [blue])  # within the window: replaces
     assert [o.name for o in memory.source.objects()] == ['blue block']
-    memory.record(memory.begin(11.4), 11.4, [red, blue])  # the first frame past the window still replaces
+    memory.record(memory.begin(10.9), 10.9, [red, blue])
     memory.record(memory.begin(11.8), 11.8, [blue])  # settled: the red block, hidden now, is remembered
     assert [(o.name, o.visible) for o in memory.source.objects()] == [('blue block', True), ('red block', False)]
+
+
+def test_frames_are_analysed_only_when_asked_and_then_the_newest():
+    red = PerceivedObject.from_fields('red', 'block', (0.0, -0.4, 0.02), (0.04,) * 3)
+    analysed = []
+
+    def analyse(frame):
+        analysed.append(frame)
+        return [dataclasses.replace(red, position=(frame, -0.4, 0.02))]
+
+    source = SnapshotSource('camera')
+    memory = CameraMemory(source, analyse=analyse)
+    for stamp in (1.0, 1.1, 1.2):  # a camera's stream: nobody asks, nothing is analysed
+        memory.offer(stamp, stamp)
+    assert analysed == []
+    assert source.state('red block').position[0] == 1.2  # asked: the newest frame only
+    assert source.names() == ['red block'] and analysed == [1.2]  # asked again, no newer frame: no new analysis
+    memory.offer(1.3, 1.3)
+    memory.offer(1.25, 1.25)  # late and older: not kept
+    _, stamp = source.stamped_state('the red block')
+    assert stamp == 1.3 and analysed == [1.2, 1.3]
+    memory.forget()
+    with pytest.raises(NoObservationError):  # nothing newer than the forget yet
+        source.names()
