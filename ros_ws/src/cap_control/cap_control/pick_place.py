@@ -174,8 +174,8 @@ def yaw_of_quaternion(x: float, y: float, z: float, w: float) -> float:
 class PickPlaceConfig:
     """Heights, gripper settings, checks and motion limits of pick-and-place [m, rad, N, s].
 
-    Every field but joint_limits and clear_view_from is a parameter of the pick_place node, under its field name
-    (workspace and cartesian_limits as dotted names: workspace.x_min, cartesian_limits.speed).
+    Every field but joint_limits, clear_view_from and look_again_joints is a parameter of the pick_place node, under
+    its field name (workspace and cartesian_limits as dotted names: workspace.x_min, cartesian_limits.speed).
     """
 
     workspace: Workspace = Workspace()
@@ -205,6 +205,9 @@ class PickPlaceConfig:
     # moves clear_view_distance sideways at travel height, out of that camera's line of sight to what it just
     # placed, so that perception sees the new stack rather than remembering its blocks where they were.
     clear_view_from: tuple[float, float, float] | None = None
+    # With clear_view_from: joint positions out of the camera's view, where the arm goes to look again when what it
+    # placed is still hidden after the sideways move (the forearm can hang over a stack near the base); None: never.
+    look_again_joints: tuple[float, ...] | None = None
     # 0.12 left far targets on the centre line hidden by the forearm.
     clear_view_distance: float = parameter(0.20, 'How far sideways the tool moves after placing to clear the '
                                            'camera\'s view (with clear_view) [m].')
@@ -394,6 +397,8 @@ class PickPlacePlan:
     grasp_z: float
     place_z: float
     config: PickPlaceConfig
+    # A move out of the camera's view, made only when the placed object is hidden after the retreat.
+    look_again: TrajectoryStep | None = None
 
     @property
     def duration(self) -> float:
@@ -459,6 +464,17 @@ class _Planner:
             raise PickPlaceError(PickPlaceErrorCode.IK_FAILED, f'cannot move to {what}: {error}')
         self.joints = trajectory.end
         return TrajectoryStep(trajectory, False, goal, top_down_pose(xyz, yaw))
+
+    def joint_goal(self, joints: Sequence[float], what: str) -> TrajectoryStep:
+        """A joint-space move to the given joint positions."""
+        goal = np.asarray(joints, dtype=float)
+        try:
+            trajectory = time_joint_path([self.joints, goal], self.config.joint_limits,
+                                         self.config.trajectory_period)
+        except TrajectoryError as error:
+            raise PickPlaceError(PickPlaceErrorCode.IK_FAILED, f'cannot move to {what}: {error}')
+        self.joints = trajectory.end
+        return TrajectoryStep(trajectory, False, goal, forward_kinematics(goal, self.config.tool_offset))
 
     def line(self, xyz: Sequence[float], yaw: float, what: str, stop_on_contact: bool = False,
              limits: CartesianLimits | None = None) -> TrajectoryStep:
@@ -862,5 +878,7 @@ def plan_pick_place(obj: ObjectInfo, target: Target, current_joints: Sequence[fl
     ]
     for index, stage in enumerate(stages):
         stage.progress = (index + 1) / len(stages)
+    look_again = planner.joint_goal(config.look_again_joints, 'out of the camera\'s view') \
+        if config.clear_view_from is not None and config.look_again_joints is not None else None
     return PickPlacePlan(obj, target_xy, target_description, stages, grasp_yaw, place_yaw, travel_z, grasp_z,
-                         place_z, config)
+                         place_z, config, look_again)

@@ -30,6 +30,7 @@ from typing import Callable, Sequence
 import numpy as np
 from cap_ros_common.parameters import parameter
 from cap_tabletop.cameras import CAMERAS, DEFAULT_CAMERA
+from cap_tabletop.workspace import REST_JOINTS
 
 from cap_control.pick_place import (
     GripperStep, ObjectInfo, Observation, PickPlaceConfig, PickPlaceError, PickPlaceErrorCode, PickPlacePlan,
@@ -73,15 +74,24 @@ class MotionSettings:
     camera_position: tuple[float, ...] = parameter(CAMERAS[DEFAULT_CAMERA].position, 'Where the camera perception '
                                                    'watches the table from (world frame) [m]; used with clear_view. '
                                                    'The default is the simulated top camera.')
+    look_again_joints: tuple[float, ...] = parameter(REST_JOINTS, 'With clear_view: joint positions out of the '
+                                                     'camera\'s view [rad], where the arm goes to look again when what '
+                                                     'it placed is still hidden after the sideways move; empty = '
+                                                     'never. The default is the simulated arm\'s rest pose.')
 
     def apply(self, config: PickPlaceConfig) -> PickPlaceConfig:
         """`config` with the scaled joint limits and, with clear_view, the camera to keep out of the view of."""
         if self.clear_view and len(self.camera_position) != 3:
             raise ValueError(f'camera_position must be x, y, z, not {list(self.camera_position)}')
+        if self.clear_view and len(self.look_again_joints) not in (0, 6):
+            raise ValueError(f'look_again_joints must be 6 joint positions or empty, not '
+                             f'{list(self.look_again_joints)}')
         camera = tuple(float(v) for v in self.camera_position) if self.clear_view else None
+        look_again = tuple(float(v) for v in self.look_again_joints) if self.clear_view and self.look_again_joints \
+            else None
         return dataclasses.replace(config, joint_limits=config.joint_limits.scaled(self.velocity_scale,
                                                                                    self.acceleration_scale),
-                                   clear_view_from=camera)
+                                   clear_view_from=camera, look_again_joints=look_again)
 
 
 # ----------------------------------------------------------------------------------------------------- runs
@@ -217,7 +227,12 @@ class _Run(GoalRun):
                 self.grip_result(opening, observation)
             if stage.name == StageName.RETREAT:
                 # The outcome is judged on what perception sees after the retreat, not on what it last saw.
-                self.wait_for_fresh_view(plan.object.name)
+                if not self.wait_for_fresh_view(plan.object.name, warn=plan.look_again is None) \
+                        and plan.look_again is not None:
+                    self.executor.log('info', f'the {plan.object.name} is hidden from the camera after placing; '
+                                      f'moving the arm out of its view to look again')
+                    self.move(plan, plan.look_again, stage.name)
+                    self.wait_for_fresh_view(plan.object.name)
             self.check(plan, stage, observation)
             done = stage.progress
         feedback(plan.stages[-1].name, 1.0)
@@ -267,9 +282,9 @@ class _Run(GoalRun):
         observation.gripper_position = outcome.width
         observation.gripper_stalled = outcome.stalled
 
-    def wait_for_fresh_view(self, name: str) -> None:
+    def wait_for_fresh_view(self, name: str, warn: bool = True) -> bool:
         """Wait until perception answers from an observation made after the retreat (and so after the tool cleared
-        the camera's view, with clear_view).
+        the camera's view, with clear_view); False if that observation does not show the object.
 
         Otherwise the check after it, and the next command, would see the placed object where perception last saw
         it (a camera: before the tool moved out of its view; the simulator's objects: up to a publishing period
@@ -277,23 +292,23 @@ class _Run(GoalRun):
         """
         cleared_at = self.arm.state_time()
         if cleared_at is None:
-            return
+            return True
         deadline = time.monotonic() + self.timeouts.view_timeout
         while True:
             report = self.object_state(name)
             if not report.success:
-                return  # perception no longer knows it: the check says so
+                return True  # perception no longer knows it: the check says so
             if report.stamp == 0.0:
-                return
+                return True
             if report.stamp >= cleared_at:
-                if not report.visible:
+                if not report.visible and warn:
                     self.executor.log('warning', f'the {name} is out of the camera\'s sight after placing; its '
                                       f'position is the one last seen')
-                return
+                return report.visible
             if time.monotonic() > deadline:
                 self.executor.log('warning', f'perception saw nothing newer than the place within '
                                   f'{self.timeouts.view_timeout:.0f} s; going on with what it has')
-                return
+                return True
             # A timed retry: perception offers no event for "an observation newer than t".
             self.pause(FRESH_VIEW_RETRY)
 

@@ -67,7 +67,8 @@ class PickPlaceNode(ArmNode):
     def __init__(self, **kwargs) -> None:
         super().__init__('pick_place', **kwargs)
         settings = declare_config(self, MotionSettings)
-        self.config = settings.apply(declare_config(self, PickPlaceConfig, skip=('joint_limits', 'clear_view_from')))
+        self.config = settings.apply(declare_config(
+            self, PickPlaceConfig, skip=('joint_limits', 'clear_view_from', 'look_again_joints')))
         self.timeouts = declare_config(self, ExecutionConfig)
         self.set_timeouts(self.timeouts.server_timeout, self.timeouts.service_timeout)
         self._create_perception_clients(self)

@@ -26,6 +26,7 @@ from typing import Sequence
 
 import mujoco
 import numpy as np
+from cap_tabletop.workspace import REST_JOINTS
 
 from cap_sim_bridge import camera as camera_math
 from cap_sim_bridge import scene, scenes
@@ -43,9 +44,8 @@ TCP_SITE = 'tcp'
 FLANGE_SITE = 'flange'
 TCP_OFFSET = 0.15  # tcp distance along the flange's +z [m]
 
-# Arm pose at reset: the tcp points straight down at (0, -0.2, 0.45), above the table's top edge, out of the
-# top camera's view of the table.
-HOME_JOINT_POSITIONS = np.array([0.8413, -2.2842, 1.7017, -0.9883, -1.5708, -0.7295])
+# Arm pose at reset (the table top's REST_JOINTS).
+HOME_JOINT_POSITIONS = np.array(REST_JOINTS)
 
 GRIPPER_MAX_OPENING = scenes.GRIPPER_MAX_OPENING  # [m], pad to pad
 GRIPPER_DEFAULT_FORCE = 20.0  # [N] per finger

@@ -12,6 +12,10 @@ TABLE_X_RANGE: tuple[float, float] = (-0.3, 0.3)
 TABLE_Y_RANGE: tuple[float, float] = (-0.8, -0.2)
 TABLE_Z = 0.0  # height of the table-top surface in the world frame [m]
 
+# The arm's joint positions at a scene reset (base, shoulder, elbow, three wrists) [rad]: the tool points straight
+# down at (0, -0.2, 0.45), above the table's top edge, out of the top camera's view of the table.
+REST_JOINTS: tuple[float, ...] = (0.8413, -2.2842, 1.7017, -0.9883, -1.5708, -0.7295)
+
 NORMALISED_ORIGIN = np.array([-0.25, -0.75])
 NORMALISED_SPAN = np.array([0.5, 0.5])
 
