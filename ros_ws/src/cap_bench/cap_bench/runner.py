@@ -56,6 +56,7 @@ class BenchOptions:
     tasks: tuple[str, ...] = tuple(TEMPLATES)
     trials: int = 50
     perception: str = 'ground_truth'  # or 'rgbd'
+    camera_rate: float = 0.0  # with perception rgbd [Hz of simulated time]; 0: RGBD_CAMERA_RATE
     base_seed: int = 0
     jobs: int = 1
     out: str = 'output/bench'
@@ -70,6 +71,20 @@ class BenchOptions:
     backend: str = 'http'  # for policy=llm: 'http' (base_url) or 'local' (a llama.cpp server started for the run)
     model_file: str = ''  # for backend=local; empty: the default model of `make model`
     model_threads: int = 1
+
+
+# The benchmark's camera rate with the RGB-D detector. Perception analyses the newest frame only when asked, so a
+# frame matters only at a question; rendering and sending a 640x480 colour and depth frame costs more than 15 steps
+# of physics, and at 10 Hz it was a third of an RGB-D episode's wall time. At 2 Hz a question waits at most 0.5 s of
+# simulated time for a frame newer than the last motion.
+RGBD_CAMERA_RATE = 2.0
+
+
+def rgbd_camera_rate(options: BenchOptions) -> float:
+    """The bridge's camera rate for a run: 0 (no images) with ground truth."""
+    if options.perception != 'rgbd':
+        return 0.0
+    return options.camera_rate or RGBD_CAMERA_RATE
 
 
 def policy_name(options: BenchOptions) -> str:
@@ -260,7 +275,7 @@ class _EpisodeRunner:
                 lmp['model'] = options.model
         self.graph = Graph(self.context, GraphOptions(
             perception=options.perception, llm_backend=backend,
-            cassette=str(cassette) if cassette else '', camera_rate=10.0 if options.perception == 'rgbd' else 0.0,
+            cassette=str(cassette) if cassette else '', camera_rate=rgbd_camera_rate(options),
             extra={'lmp_node': lmp, 'sim_bridge': {'cameras': [DEFAULT_CAMERA]}}, cpu=cpu))
         self.node = rclpy.create_node('cap_bench', context=self.context)
         self.graph.executor.add_node(self.node)
@@ -530,6 +545,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--tasks', default=','.join(TEMPLATES), help='comma-separated template names')
     parser.add_argument('--trials', type=int, default=50, help='episodes per row [50]')
     parser.add_argument('--perception', choices=('ground_truth', 'rgbd'), default='ground_truth')
+    parser.add_argument('--camera-rate', type=float, default=RGBD_CAMERA_RATE,
+                        help=f'with --perception rgbd: camera images per second of simulated time '
+                             f'[{RGBD_CAMERA_RATE:g}]')
     parser.add_argument('--seed', type=int, default=0, help='base seed: trial i uses seed base + i [0]')
     parser.add_argument('--jobs', type=int, default=1,
                         help='parallel graphs (processes) [1]; job i uses ROS_DOMAIN_ID + i when ROS_DOMAIN_ID is '
@@ -588,7 +606,8 @@ def main(argv: list[str] | None = None) -> int:
               f'{", ".join(TEMPLATES)}', file=sys.stderr)
         return 2
     options = BenchOptions(policy=args.policy, groups=groups, tasks=tasks, trials=args.trials,
-                           perception=args.perception, base_seed=args.seed, jobs=args.jobs, out=args.out,
+                           perception=args.perception, camera_rate=args.camera_rate, base_seed=args.seed,
+                           jobs=args.jobs, out=args.out,
                            resume=args.resume, episode_timeout_s=args.episode_timeout, executor=args.executor,
                            ray_address=args.ray_address, **model_settings(args))
     try:
