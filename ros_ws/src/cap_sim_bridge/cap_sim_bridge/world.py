@@ -176,6 +176,7 @@ class TabletopWorld:
         self._arm_feedforward = bias[:, 2] / bias[:, 1]
         # The servos' parameters, restored when torque control ends (set_arm_torque_mode).
         self._arm_servo_gain = model.actuator_gainprm[self._arm_actuator_ids].copy()
+        self._feedforward_buffers = (np.zeros(model.nv), np.zeros(model.nv))  # reused each step (no allocation)
         self._arm_servo_bias = bias.copy()
         self.arm_torque_mode = False
         self._pushes: list[_Push] = []
@@ -245,8 +246,12 @@ class TabletopWorld:
                 if ink is not None:
                     ink.update(data)
                 return
-            for _ in range(n):
-                self._update_references()
+            # The trajectory's references for every step of the chunk at once (the time after each step).
+            references = self._trajectory.sample_many(data.time + model.opt.timestep * np.arange(1, n + 1)) \
+                if self._trajectory is not None else None
+            for k in range(n):
+                self._update_references(None if references is None else
+                                        (references[0][k], references[1][k], references[2][k]))
                 if self._pushes:
                     self._apply_pushes()
                 mujoco.mj_step(model, data)
@@ -257,13 +262,19 @@ class TabletopWorld:
         """Advance simulated time by duration [s] (rounded to whole steps)."""
         self.step(max(0, int(round(duration / self.timestep))))
 
-    def _update_references(self) -> None:
+    def _update_references(self, reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+        """Set the servos' references for the next step; `reference`: the trajectory's position, velocity and
+        acceleration then, if already sampled."""
         data = self.data
         if self._trajectory is not None:
-            t = data.time + self.model.opt.timestep
-            q_ref, qd_ref = self._trajectory.sample(t)
+            if reference is None:
+                t = data.time + self.model.opt.timestep
+                q_ref, qd_ref = self._trajectory.sample(t)
+                qdd_ref = self._trajectory.sample_acceleration(t)
+            else:
+                q_ref, qd_ref, qdd_ref = reference
             data.ctrl[self._arm_actuator_ids] = q_ref + self._arm_feedforward * qd_ref + \
-                self._inertia_feedforward(self._trajectory.sample_acceleration(t))
+                self._inertia_feedforward(qdd_ref)
             if data.time >= self._trajectory.end_time:
                 self._hold_positions = self._trajectory.final_positions
                 self._trajectory = None
@@ -280,9 +291,8 @@ class TabletopWorld:
         controller's model-based feed-forward does), so the arm does not lag its reference while it accelerates:
         that lag would read as contact. The servos' force range still bounds the sum."""
         model, data = self.model, self.data
-        wanted = np.zeros(model.nv)
+        wanted, torques = self._feedforward_buffers
         wanted[self._arm_dof_adr] = accelerations
-        torques = np.zeros(model.nv)
         mujoco.mj_mulM(model, data, torques, wanted)
         return torques[self._arm_dof_adr] / self._arm_servo_gain[:, 0]
 

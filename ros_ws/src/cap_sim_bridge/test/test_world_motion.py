@@ -178,3 +178,16 @@ def solve_top_down(world, target, iterations=300):
         q = q + step * min(1.0, 0.1 / max(np.linalg.norm(step), 1e-12))
     assert np.linalg.norm(error) < 1e-6
     return q
+
+
+def test_a_chunk_of_samples_is_what_sampling_each_time_gives():
+    times = np.array([0.0, 0.4, 1.0, 1.3])
+    positions = np.array([[0.0, 1.0], [0.5, 0.8], [0.2, 0.9], [0.2, 1.2]])
+    trajectory = JointTrajectory(times, positions)
+    ts = np.linspace(-0.1, 1.5, 97)  # before, inside (at waypoints too) and after
+    many_p, many_v, many_a = trajectory.sample_many(ts)
+    for t, p, v, a in zip(ts, many_p, many_v, many_a):
+        one_p, one_v = trajectory.sample(t)
+        np.testing.assert_allclose(p, one_p, atol=1e-12)
+        np.testing.assert_allclose(v, one_v, atol=1e-12)
+        np.testing.assert_allclose(a, trajectory.sample_acceleration(t), atol=1e-9)
