@@ -456,17 +456,11 @@ class _Planner:
         return min(costs)[1]
 
     def joint_move(self, xyz: Sequence[float], yaw: float, what: str) -> TrajectoryStep:
-        goal = self.solve(xyz, yaw, what)
-        try:
-            trajectory = time_joint_path([self.joints, goal], self.config.joint_limits,
-                                         self.config.trajectory_period)
-        except TrajectoryError as error:
-            raise PickPlaceError(PickPlaceErrorCode.IK_FAILED, f'cannot move to {what}: {error}')
-        self.joints = trajectory.end
-        return TrajectoryStep(trajectory, False, goal, top_down_pose(xyz, yaw))
+        """A joint-space move to the tool pointing down at xyz, turned by yaw."""
+        return self.joint_goal(self.solve(xyz, yaw, what), what, top_down_pose(xyz, yaw))
 
-    def joint_goal(self, joints: Sequence[float], what: str) -> TrajectoryStep:
-        """A joint-space move to the given joint positions."""
+    def joint_goal(self, joints: Sequence[float], what: str, pose: np.ndarray | None = None) -> TrajectoryStep:
+        """A joint-space move to the given joint positions (`pose`: the tool's there, if known)."""
         goal = np.asarray(joints, dtype=float)
         try:
             trajectory = time_joint_path([self.joints, goal], self.config.joint_limits,
@@ -474,7 +468,8 @@ class _Planner:
         except TrajectoryError as error:
             raise PickPlaceError(PickPlaceErrorCode.IK_FAILED, f'cannot move to {what}: {error}')
         self.joints = trajectory.end
-        return TrajectoryStep(trajectory, False, goal, forward_kinematics(goal, self.config.tool_offset))
+        return TrajectoryStep(trajectory, False, goal,
+                              pose if pose is not None else forward_kinematics(goal, self.config.tool_offset))
 
     def line(self, xyz: Sequence[float], yaw: float, what: str, stop_on_contact: bool = False,
              limits: CartesianLimits | None = None) -> TrajectoryStep:

@@ -163,7 +163,8 @@ class FakeWorld(Arm, Gripper, Perception):
         if obj is None:
             return done(ObjectReport(False, f'no object named {name!r}'))
         if self.hidden_from is not None:  # a camera with time stamps, and an arm that may hang over the object
-            visible = bool(np.allclose(self.q, self.hidden_from, atol=1e-3)) or not self.stages or self.stages[-1] != StageName.RETREAT
+            retreating = bool(self.stages) and self.stages[-1] == StageName.RETREAT
+            visible = bool(np.allclose(self.q, self.hidden_from, atol=1e-3)) or not retreating
             return done(ObjectReport(True, '', obj, obj.position, visible, stamp=1.0))
         return done(ObjectReport(True, '', obj, obj.position, True))
 
