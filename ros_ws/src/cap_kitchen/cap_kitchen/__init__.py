@@ -1,0 +1,1 @@
+"""Facts of the mobile kitchen domain: the room, its furniture, named locations and bins, the mobile base."""
