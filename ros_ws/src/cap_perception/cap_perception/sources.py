@@ -29,9 +29,9 @@ class SnapshotSource:
     set, is called before every read: a source that observes on demand (CameraMemory) brings itself up to date there.
     """
 
-    def __init__(self, description: str, refresh: Callable[[], None] | None = None) -> None:
+    def __init__(self, description: str) -> None:
         self.description = description
-        self.refresh = refresh
+        self.refresh: Callable[[], None] | None = None
         self._lock = threading.Lock()
         self._objects: dict[str, PerceivedObject] | None = None
         self._stamp = 0.0

@@ -43,30 +43,18 @@ class JointTrajectory:
 
     def sample(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(position, velocity) references at time t."""
-        segment = self._segment(t)
-        if segment is None:
-            at_end = self.positions[-1] if t >= self.times[-1] else self.positions[0]
-            return at_end.copy(), np.zeros(self.positions.shape[1])
-        duration, s, p0, v0, p1, v1 = segment
-        s2, s3 = s * s, s * s * s
-        position = ((2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * v0 + (-2 * s3 + 3 * s2) * p1
-                    + (s3 - s2) * v1)
-        velocity = ((6 * s2 - 6 * s) * p0 + (3 * s2 - 4 * s + 1) * v0 + (-6 * s2 + 6 * s) * p1
-                    + (3 * s2 - 2 * s) * v1) / duration
-        return position, velocity
+        positions, velocities, _ = self.sample_many(np.array([t]))
+        return positions[0], velocities[0]
 
     def sample_acceleration(self, t: float) -> np.ndarray:
         """The reference acceleration at time t (the second derivative of the segment's spline; zero outside)."""
-        segment = self._segment(t)
-        if segment is None:
-            return np.zeros(self.positions.shape[1])
-        duration, s, p0, v0, p1, v1 = segment
-        return ((12 * s - 6) * p0 + (6 * s - 4) * v0 + (6 - 12 * s) * p1 + (6 * s - 2) * v1) / (duration * duration)
+        return self.sample_many(np.array([t]))[2][0]
 
     def sample_many(self, ts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(positions, velocities, accelerations), each (len(ts), joints), at the times ts: what sample and
-        sample_acceleration give at each time, computed for all of them at once (the physics loop samples every
-        step of a chunk of steps; per step, the NumPy calls on six-vectors cost more than the physics step)."""
+        """(positions, velocities, accelerations), each (len(ts), joints), at the times ts, computed for all of them
+        at once (the physics loop samples every step of a chunk of steps; per step, the NumPy calls on six-vectors
+        cost more than the physics step). Cubic Hermite basis on s in [0, 1] within each segment, the velocities
+        scaled by the segment's duration."""
         ts = np.asarray(ts, dtype=float)
         times, joints = self.times, self.positions.shape[1]
         inside = (ts > times[0]) & (ts < times[-1])
@@ -90,18 +78,6 @@ class JointTrajectory:
         accelerations[inside] = ((12 * s - 6) * p0 + (6 * s - 4) * v0 + (6 - 12 * s) * p1
                                  + (6 * s - 2) * v1) / (duration * duration)
         return positions, velocities, accelerations
-
-    def _segment(self, t: float) -> tuple | None:
-        """(duration, s in [0, 1], p0, v0, p1, v1) of the segment holding t, or None outside the trajectory.
-
-        Cubic Hermite basis on s; the velocities are scaled by the segment's duration."""
-        times = self.times
-        if t <= times[0] or t >= times[-1]:
-            return None
-        i = int(np.searchsorted(times, t, side='right')) - 1
-        duration = times[i + 1] - times[i]
-        return (duration, (t - times[i]) / duration, self.positions[i], self.velocities[i] * duration,
-                self.positions[i + 1], self.velocities[i + 1] * duration)
 
 
 def _estimated_velocities(times: np.ndarray, positions: np.ndarray) -> np.ndarray:

@@ -262,17 +262,12 @@ class TabletopWorld:
         """Advance simulated time by duration [s] (rounded to whole steps)."""
         self.step(max(0, int(round(duration / self.timestep))))
 
-    def _update_references(self, reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+    def _update_references(self, reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> None:
         """Set the servos' references for the next step; `reference`: the trajectory's position, velocity and
-        acceleration then, if already sampled."""
+        acceleration then (None without a trajectory)."""
         data = self.data
         if self._trajectory is not None:
-            if reference is None:
-                t = data.time + self.model.opt.timestep
-                q_ref, qd_ref = self._trajectory.sample(t)
-                qdd_ref = self._trajectory.sample_acceleration(t)
-            else:
-                q_ref, qd_ref, qdd_ref = reference
+            q_ref, qd_ref, qdd_ref = reference
             data.ctrl[self._arm_actuator_ids] = q_ref + self._arm_feedforward * qd_ref + \
                 self._inertia_feedforward(qdd_ref)
             if data.time >= self._trajectory.end_time:
