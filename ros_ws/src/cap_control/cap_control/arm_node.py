@@ -1,10 +1,11 @@
-"""What the nodes that move the arm share: a port to the arm's FollowJointTrajectory action over ROS, the latest
-joint state, and the serving of one long action goal at a time that a cancel or cap/stop interrupts.
+"""What the nodes that move the robot share: the latest joint state, the serving of one long action goal at a time
+that a cancel or cap/stop interrupts, and for the arm a port to its FollowJointTrajectory action over ROS.
 
-`ArmNode` is the base of pick_place and follow_path. It keeps the latest /joint_states (and completes futures
-waiting for the arm's joints), listens to the stop topic, holds the arm's action client, and runs an action goal
-(`serve`): one at a time (a second goal is refused), with an `Interruption` that the goal's cancel and the stop
-topic set, ending CANCELED, aborted (stopped, failed) or succeeded as the executor's outcome says.
+`GoalNode` is the base of the nodes that move the robot (the navigation node's too), `ArmNode` (with the arm's
+action client) that of pick_place and follow_path. A GoalNode keeps the latest /joint_states (and completes futures
+waiting for named joints), listens to the stop topic, and runs an action goal (`serve`): one at a time (a second
+goal is refused), with an `Interruption` that the goal's cancel and the stop topic set, ending CANCELED, aborted
+(stopped, failed) or succeeded as the executor's outcome says.
 
 Threading: every callback is in one reentrant group, and main() spins a MultiThreadedExecutor, so the execute
 callback may wait on service and action futures whose done callbacks other executor threads run.
@@ -153,8 +154,9 @@ class ArmPort(Arm):
                           conv.follow_trajectory_goal(trajectory, contact_tolerance, goal_tolerance), conv.arm_outcome)
 
 
-class ArmNode(Node):
-    """A node that moves the arm and serves one long action goal at a time (see the module docstring).
+class GoalNode(Node):
+    """A node that serves one long action goal at a time that a cancel or the stop topic interrupts, with the latest
+    joint state (see the module docstring); ArmNode adds the arm's action client, the navigation node the base's.
 
     `goal_description` names the goals in log lines ("pick-and-place"). A subclass declares its parameters, then
     gives its timeouts with `set_timeouts`.
@@ -170,7 +172,7 @@ class ArmNode(Node):
         self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
         self._joint_lock = threading.Lock()
         self._joint_state: JointState | None = None
-        self._joint_waiters: list[Future] = []
+        self._joint_waiters: list[tuple[tuple[str, ...], Future]] = []
         self._busy = threading.Lock()
         self._run_lock = threading.Lock()
         self._running: tuple[bytes, Interruption] | None = None  # the goal id being executed and its interruption
@@ -178,8 +180,6 @@ class ArmNode(Node):
         self.create_subscription(JointState, GraphNames.JOINT_STATES_TOPIC, self._on_joint_state, 10,
                                  callback_group=callbacks)
         self.create_subscription(Empty, GraphNames.STOP_TOPIC, self._on_stop, 10, callback_group=callbacks)
-        self.arm_client = ActionClient(self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION,
-                                       callback_group=callbacks)
 
     def set_timeouts(self, server_timeout: float, service_timeout: float) -> None:
         """How long `when_ready` looks for a server [s], and how long an interrupted run waits for the controller to
@@ -190,10 +190,6 @@ class ArmNode(Node):
     def callbacks(self) -> ReentrantCallbackGroup:
         """The callback group of every callback of the node."""
         return self._callbacks
-
-    def destroy_node(self) -> None:
-        self.arm_client.destroy()
-        super().destroy_node()
 
     def _log(self, level: str, message: str) -> None:
         # rclpy refuses one call site logging at different severities: one call per level.
@@ -210,13 +206,13 @@ class ArmNode(Node):
         with self._joint_lock:
             return self._joint_state
 
-    def arm_joints(self) -> Future:
-        """Completes with the arm joints of the first joint state that has them all."""
+    def joints(self, names: tuple[str, ...]) -> Future:
+        """Completes with the positions of the named joints from the first joint state that has them all."""
         future: Future = Future()
         with self._joint_lock:
-            joints = None if self._joint_state is None else conv.joint_positions(self._joint_state, JOINT_NAMES)
+            joints = None if self._joint_state is None else conv.joint_positions(self._joint_state, names)
             if joints is None:
-                self._joint_waiters.append(future)
+                self._joint_waiters.append((names, future))
                 return future
         future.set_result(joints)
         return future
@@ -257,15 +253,20 @@ class ArmNode(Node):
 
     # ------------------------------------------------------------------------------------------- inputs
     def _on_joint_state(self, msg: JointState) -> None:
+        answered = []
         with self._joint_lock:
             self._joint_state = msg
-            waiters = self._joint_waiters
-            joints = conv.joint_positions(msg, JOINT_NAMES) if waiters else None
-            if joints is not None:
-                self._joint_waiters = []
-        if joints is not None:
-            for future in waiters:
-                future.set_result(joints.copy())
+            if self._joint_waiters:
+                waiting = []
+                for names, future in self._joint_waiters:
+                    joints = conv.joint_positions(msg, names)
+                    if joints is None:
+                        waiting.append((names, future))
+                    else:
+                        answered.append((future, joints))
+                self._joint_waiters = waiting
+        for future, joints in answered:
+            future.set_result(joints)
 
     def _on_stop(self, _: Empty) -> None:
         with self._run_lock:
@@ -323,6 +324,23 @@ class ArmNode(Node):
         return result
 
 
+class ArmNode(GoalNode):
+    """A GoalNode that moves the arm: pick_place and follow_path."""
+
+    def __init__(self, name: str, **kwargs) -> None:
+        super().__init__(name, **kwargs)
+        self.arm_client = ActionClient(self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION,
+                                       callback_group=self.callbacks)
+
+    def destroy_node(self) -> None:
+        self.arm_client.destroy()
+        super().destroy_node()
+
+    def arm_joints(self) -> Future:
+        """Completes with the arm joints of the first joint state that has them all."""
+        return self.joints(JOINT_NAMES)
+
+
 def _mark_canceling(goal_handle, timeout_s: float = 1.0) -> bool:
     """Wait (at most `timeout_s`) until the action server has marked the goal CANCELING; True once it has.
 
@@ -353,4 +371,4 @@ def spin_node(node_class: type, args: list[str] | None = None) -> None:
         rclpy.try_shutdown()
 
 
-__all__ = ['ActionGoal', 'ArmNode', 'ArmPort', 'READY_CHECK_PERIOD', 'done_future', 'relay', 'spin_node']
+__all__ = ['ActionGoal', 'ArmNode', 'ArmPort', 'GoalNode', 'READY_CHECK_PERIOD', 'done_future', 'relay', 'spin_node']

@@ -286,6 +286,30 @@ def follow_on_ideal_base(follower: PathFollower, pose: Sequence[float], dt: floa
     return np.array(poses), commands
 
 
+def base_trajectory(poses: np.ndarray, commands: Sequence[Command], dt: float, start_yaw: float,
+                    period: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The timed trajectory of the base's joints (x, y, yaw) that drives `poses` (an ideal base's, every `dt`, under
+    `commands`, as follow_on_ideal_base gives them): (times from 0 (N,), positions (N, 3), velocities (N, 3)), a
+    point every `period` and the last one.
+
+    The yaw is continuous and starts at `start_yaw`, the base joint's value (which counts whole turns), so the
+    base turns the way the follower did and never the long way round through a wrap at pi.
+    """
+    poses = np.asarray(poses, dtype=float)
+    yaw = np.unwrap(poses[:, 2])
+    yaw += start_yaw - yaw[0]
+    velocities = np.zeros_like(poses)
+    for k, command in enumerate(commands[:len(poses) - 1]):  # command k moves pose k to pose k + 1
+        velocities[k] = (command.speed * math.cos(poses[k, 2]), command.speed * math.sin(poses[k, 2]),
+                         command.yaw_rate)
+    every = max(1, int(round(period / dt)))
+    keep = list(range(0, len(poses), every))
+    if keep[-1] != len(poses) - 1:
+        keep.append(len(poses) - 1)
+    positions = np.column_stack([poses[:, 0], poses[:, 1], yaw])[keep]
+    return np.asarray(keep, dtype=float) * dt, positions, velocities[keep]
+
+
 def _along(a: np.ndarray, b: np.ndarray, xy: Sequence[float]) -> float:
     """Where the point projects on segment a-b, as a fraction of it (clamped at 0, not at 1)."""
     ab = b - a

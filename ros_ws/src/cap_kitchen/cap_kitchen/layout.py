@@ -23,6 +23,7 @@ BASE_MAX_ACCELERATION = 0.5  # [m/s^2]
 BASE_MAX_YAW_RATE = 1.2  # [rad/s]
 BASE_MAX_YAW_ACCELERATION = 2.0  # [rad/s^2]
 APPROACH_GAP = 0.12  # [m] between the base's edge and the furniture at a location's approach pose
+NAVIGATION_MARGIN = 0.05  # [m] clearance a planned path keeps beyond the base's radius (less than APPROACH_GAP)
 
 # The side of a piece of furniture the robot approaches from (outward normal of that side, in the world frame).
 SIDES: dict[str, tuple[float, float]] = {'+x': (1.0, 0.0), '-x': (-1.0, 0.0), '+y': (0.0, 1.0), '-y': (0.0, -1.0)}
@@ -69,6 +70,11 @@ FURNITURE: tuple[Furniture, ...] = (
 FURNITURE_BY_NAME: dict[str, Furniture] = {piece.name: piece for piece in FURNITURE}
 LOCATION_NAMES: tuple[str, ...] = tuple(FURNITURE_BY_NAME)
 BIN_NAMES: tuple[str, ...] = tuple(piece.name for piece in FURNITURE if piece.kind == 'bin')
+
+def obstacle_footprints() -> list[tuple[float, float, float, float]]:
+    """The floor the furniture stands on, as (x_min, y_min, x_max, y_max) boxes (the walls bound the room)."""
+    return [piece.footprint for piece in FURNITURE]
+
 
 # Where the robot starts an episode: the room's open middle, facing +x.
 START_POSE: tuple[float, float, float] = (0.0, 0.0, 0.0)

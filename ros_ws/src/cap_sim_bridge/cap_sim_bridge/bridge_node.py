@@ -2,11 +2,13 @@
 driver and the cameras.
 
 Publishes /clock (simulated time), /joint_states (the arm, the fingers and the scene's own joints: a cart-pole's, the
-whiteboard tool's sprung slides), the ground-truth object array, per camera <CAMERA_NAMESPACE>/<camera>/{color,
-depth, camera_info, pose} (a camera is rendered only while somebody subscribes to its colour or depth images, and
-depth only for a depth subscriber), and in a scene with a whiteboard its ink (SIM_INK_TOPIC when it changes, at most
-`ink_rate` times a second of simulated time, and a PNG from SIM_GET_INK_SERVICE); serves the scene reset, a
-FollowJointTrajectory action and a GripperCommand action; for controllers, lockstep stepping of a plant
+whiteboard tool's sprung slides, a mobile base's x, y and yaw), the ground-truth object array, per camera
+<CAMERA_NAMESPACE>/<camera>/{color, depth, camera_info, pose} (a camera is rendered only while somebody subscribes
+to its colour or depth images, and depth only for a depth subscriber), and in a scene with a whiteboard its ink
+(SIM_INK_TOPIC when it changes, at most `ink_rate` times a second of simulated time, and a PNG from
+SIM_GET_INK_SERVICE); serves the scene reset, a
+FollowJointTrajectory action and a GripperCommand action (and in a scene with a mobile base, a FollowJointTrajectory
+action over the base's joints, SIM_FOLLOW_BASE_TRAJECTORY_ACTION); for controllers, lockstep stepping of a plant
 (ControlStep, lockstep.py) and pushes on the tool (PushTool). Like a robot driver it does not listen to /cap/stop:
 the motion owners (cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it
 stopped. The physics runs in a thread of its own (never on an executor thread); the callbacks, which may block
@@ -28,10 +30,11 @@ QoS, chosen on purpose:
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import rclpy
@@ -57,6 +60,7 @@ from cap_sim_bridge.pacing import LoopPacing
 from cap_sim_bridge.rest import RestWatch
 from cap_sim_bridge.config import SimBridgeConfig, cameras_to_publish
 from cap_sim_bridge.lockstep import Lockstep
+from cap_sim_bridge.mobile_base import BASE_JOINT_NAMES
 from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES, TabletopWorld
 
 STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -79,6 +83,20 @@ FEEDBACK_PERIOD = 0.05  # [s] wall time between feedback messages
 
 def camera_topic(camera: str, kind: str) -> str:
     return f'{GraphNames.CAMERA_NAMESPACE}/{camera}/{kind}'
+
+
+@dataclasses.dataclass(frozen=True)
+class _TrajectoryTarget:
+    """What a FollowJointTrajectory server drives (the arm, or a mobile base), as the world's calls for it."""
+
+    name: str
+    joint_names: tuple[str, ...]
+    follow: Callable[..., float]  # (times, positions, velocities) -> end time
+    reference: Callable[[], tuple[np.ndarray, np.ndarray]]
+    hold: Callable[[], None]
+    serial: Callable[[], int]  # counts commands: a change means the goal was replaced
+    positions: Callable[[], np.ndarray]
+    velocities: Callable[[], np.ndarray]
 
 
 class SimBridgeNode(Node):
@@ -123,9 +141,18 @@ class SimBridgeNode(Node):
         self._ink_rate = config.ink_rate
         self._trajectory_server = ActionServer(
             self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION,
-            lambda handle: self._while_running(self._execute_trajectory, handle),
+            lambda handle: self._while_running(self._execute_trajectory, handle, self._arm_target()),
             goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
             result_timeout=RESULT_TIMEOUT_S, callback_group=callbacks)
+        # A mobile base is driven by timed trajectories of its joints too (scenes that have one; the server is made
+        # at start: a reset keeps the scene).
+        self._base_server = None
+        if self.world.base is not None:
+            self._base_server = ActionServer(
+                self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_BASE_TRAJECTORY_ACTION,
+                lambda handle: self._while_running(self._execute_trajectory, handle, self._base_target()),
+                goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
+                result_timeout=RESULT_TIMEOUT_S, callback_group=callbacks)
         self._gripper_server = ActionServer(
             self, GripperCommand, GraphNames.SIM_GRIPPER_ACTION,
             lambda handle: self._while_running(self._execute_gripper, handle),
@@ -159,6 +186,8 @@ class SimBridgeNode(Node):
         self._physics.join(timeout=10.0)
         self._trajectory_server.destroy()
         self._gripper_server.destroy()
+        if self._base_server is not None:
+            self._base_server.destroy()
         super().destroy_node()
 
     # ------------------------------------------------------------------------------------------- physics
@@ -381,47 +410,58 @@ class SimBridgeNode(Node):
         return response
 
     # ------------------------------------------------------------------------------------------- goals
-    def _while_running(self, execute, goal_handle):
+    def _while_running(self, execute, goal_handle, *args):
         """Run a goal's execute callback; the world is not idle meanwhile (nor for idle_after afterwards)."""
         with self._goals_lock:
             self._goals_running += 1
         self._woken.set()
         try:
-            return execute(goal_handle)
+            return execute(goal_handle, *args)
         finally:
             with self._goals_lock:
                 self._goals_running -= 1
             self._woken.set()
 
     # ---------------------------------------------------------------------------------------- trajectory
-    def _execute_trajectory(self, goal_handle) -> FollowJointTrajectory.Result:
+    def _arm_target(self) -> '_TrajectoryTarget':
+        world = self.world
+        return _TrajectoryTarget('arm', ARM_JOINT_NAMES, world.follow_trajectory, world.reference, world.hold,
+                                 lambda: world.arm_command_serial, world.joint_positions, world.joint_velocities)
+
+    def _base_target(self) -> '_TrajectoryTarget':
+        world = self.world
+        return _TrajectoryTarget('base', BASE_JOINT_NAMES, world.follow_base_trajectory, world.base_reference,
+                                 world.hold_base, lambda: world.base.command_serial, world.base_pose,
+                                 world.base_velocity)
+
+    def _execute_trajectory(self, goal_handle, target: '_TrajectoryTarget') -> FollowJointTrajectory.Result:
         world = self.world
         result = FollowJointTrajectory.Result()
         with world.lock:
             try:
-                plan = trajectory_goal.plan_from_goal(goal_handle.request, ARM_JOINT_NAMES, world.reference()[0],
+                plan = trajectory_goal.plan_from_goal(goal_handle.request, target.joint_names, target.reference()[0],
                                                       self._goal_tolerance, self._goal_time_tolerance)
-                end_time = world.follow_trajectory(plan.times, plan.positions, plan.velocities)
+                end_time = target.follow(plan.times, plan.positions, plan.velocities)
             except trajectory_goal.GoalError as error:
                 return self._abort(goal_handle, result, error.code, str(error))
             except ValueError as error:
                 return self._abort(goal_handle, result, trajectory_goal.INVALID_GOAL, str(error))
-            serial = world.arm_command_serial
+            serial = target.serial()
             start_time = world.time
         last_feedback = 0.0
         while True:
             if goal_handle.is_cancel_requested:
                 with world.lock:
-                    if world.arm_command_serial == serial:
-                        world.hold()
+                    if target.serial() == serial:
+                        target.hold()
                 goal_handle.canceled()
-                result.error_string = 'cancelled: the arm holds where it stopped'
+                result.error_string = f'cancelled: the {target.name} holds where it stopped'
                 return result
             with world.lock:
-                replaced = world.arm_command_serial != serial
+                replaced = target.serial() != serial
                 now = world.time
-                positions, velocities = world.joint_positions(), world.joint_velocities()
-                desired, desired_velocities = world.reference()
+                positions, velocities = target.positions(), target.velocities()
+                desired, desired_velocities = target.reference()
             if replaced:
                 return self._abort(goal_handle, result, trajectory_goal.INVALID_GOAL,
                                    'replaced by a newer trajectory, a hold or a scene reset')
@@ -429,11 +469,13 @@ class SimBridgeNode(Node):
                 return self._abort(goal_handle, result, trajectory_goal.INVALID_GOAL, 'the simulation stopped')
             if time.monotonic() - last_feedback >= FEEDBACK_PERIOD:
                 last_feedback = time.monotonic()
-                goal_handle.publish_feedback(self._trajectory_feedback(now, now - start_time, desired,
-                                                                       desired_velocities, positions, velocities))
-            violation = plan.path_violation(positions, desired, ARM_JOINT_NAMES) if now < end_time else None
+                goal_handle.publish_feedback(self._trajectory_feedback(
+                    target.joint_names, now, now - start_time, desired, desired_velocities, positions, velocities))
+            violation = plan.path_violation(positions, desired, target.joint_names) if now < end_time else None
             if violation:
-                world.hold()
+                with world.lock:
+                    if target.serial() == serial:
+                        target.hold()
                 return self._abort(goal_handle, result, trajectory_goal.PATH_TOLERANCE_VIOLATED, violation)
             if now >= end_time:
                 if plan.goal_reached(positions, velocities):
@@ -442,7 +484,7 @@ class SimBridgeNode(Node):
                     return result
                 if now > end_time + plan.goal_time_tolerance:
                     return self._abort(goal_handle, result, trajectory_goal.GOAL_TOLERANCE_VIOLATED,
-                                       'goal not reached in time: ' + plan.goal_errors(positions, ARM_JOINT_NAMES))
+                                       'goal not reached in time: ' + plan.goal_errors(positions, target.joint_names))
             time.sleep(POLL_PERIOD)
 
     @staticmethod
@@ -453,9 +495,9 @@ class SimBridgeNode(Node):
         return result
 
     @staticmethod
-    def _trajectory_feedback(now, elapsed, desired, desired_velocities, positions, velocities):
+    def _trajectory_feedback(joint_names, now, elapsed, desired, desired_velocities, positions, velocities):
         duration = duration_msg(elapsed)
-        feedback = FollowJointTrajectory.Feedback(header=conv.header(now), joint_names=list(ARM_JOINT_NAMES))
+        feedback = FollowJointTrajectory.Feedback(header=conv.header(now), joint_names=list(joint_names))
         feedback.desired = JointTrajectoryPoint(positions=desired.tolist(), velocities=desired_velocities.tolist(),
                                                 time_from_start=duration)
         feedback.actual = JointTrajectoryPoint(positions=positions.tolist(), velocities=velocities.tolist(),

@@ -23,6 +23,7 @@ from typing import Callable, Sequence
 
 import mujoco
 from cap_tabletop import cameras as tabletop_cameras
+from cap_tabletop.workspace import REST_JOINTS
 
 from cap_sim_bridge import scene as objects_module
 from cap_sim_bridge.ink import InkSpec
@@ -53,6 +54,7 @@ class SceneSpec:
     surface_z: float = 0.0  # height of the surface objects rest on at reset [m]
     ink: InkSpec | None = None  # a surface the tool draws on (cap_sim_bridge.ink), if the scene has one
     home_gripper_opening: float = GRIPPER_MAX_OPENING  # the fingers' opening at reset [m] (open, by default)
+    home_joints: tuple[float, ...] = tuple(REST_JOINTS)  # the arm's joints at reset [rad]
     # initialize(model, data, seed): the scene's own seeded start state after the robot and objects are placed
     # (e.g. a cart-pole's initial lean); None: nothing.
     initialize: Callable[[mujoco.MjModel, mujoco.MjData, int], None] | None = None
@@ -103,7 +105,7 @@ _entry_points_loaded = False
 
 
 # Scenes of this package beyond the table top, in modules of their own (imported when a scene is first looked up).
-BUILT_IN_SCENE_MODULES = ('cap_sim_bridge.whiteboard_scene',)
+BUILT_IN_SCENE_MODULES = ('cap_sim_bridge.whiteboard_scene', 'cap_sim_bridge.kitchen_scene')
 
 
 def _load_entry_points() -> None:

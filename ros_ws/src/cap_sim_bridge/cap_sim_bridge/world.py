@@ -31,6 +31,7 @@ from cap_tabletop.workspace import REST_JOINTS
 from cap_sim_bridge import camera as camera_math
 from cap_sim_bridge import scene, scenes
 from cap_sim_bridge.ink import InkCanvas, InkSurface
+from cap_sim_bridge.mobile_base import MobileBase
 from cap_sim_bridge.rendering import RgbdRenderer
 from cap_sim_bridge.scene import ObjectSpec
 from cap_sim_bridge.trajectory import JointTrajectory
@@ -44,7 +45,7 @@ TCP_SITE = 'tcp'
 FLANGE_SITE = 'flange'
 TCP_OFFSET = 0.15  # tcp distance along the flange's +z [m]
 
-# Arm pose at reset (the table top's REST_JOINTS).
+# Arm pose at reset in the table top (its REST_JOINTS); a scene may give its own (SceneSpec.home_joints).
 HOME_JOINT_POSITIONS = np.array(REST_JOINTS)
 
 GRIPPER_MAX_OPENING = scenes.GRIPPER_MAX_OPENING  # [m], pad to pad
@@ -117,7 +118,8 @@ class TabletopWorld:
         """Place the objects (default: the scene's episode for this seed) and let them settle.
 
         objects: ObjectSpec or names like "red block"; specs without a position get one sampled from the seed
-        under the spawn rules. The arm goes to HOME_JOINT_POSITIONS with the gripper open. Returns the settled
+        under the spawn rules. The arm goes to the scene's home joints (HOME_JOINT_POSITIONS in the table top) with
+        the gripper open, a mobile base to the scene's start pose. Returns the settled
         object states. Raises ValueError for unknown colours or categories, duplicate names, or impossible layouts.
         """
         specs = [ObjectSpec.from_name(o) if isinstance(o, str) else o for o in objects] if objects else \
@@ -159,6 +161,8 @@ class TabletopWorld:
                 self.data.qpos[adr:adr + 7] = [x, y, z, 1.0, 0.0, 0.0, 0.0]
             if self.scene.initialize is not None:  # the scene's own seeded start (e.g. a cart-pole's lean)
                 self.scene.initialize(self.model, self.data, seed)
+            if self.base is not None:
+                self.base.hold_here(self.data)
             self.data.time = previous_time
             mujoco.mj_forward(self.model, self.data)
             self.run_for(settle_time)
@@ -199,6 +203,8 @@ class TabletopWorld:
         for ids in self._object_geom_ids.values():
             self._object_geom_set[ids] = True
         self._ink = InkSurface(model, self.scene.ink, self.ink_canvas) if self.ink_canvas is not None else None
+        # A mobile base, in scenes that have one (the kitchen).
+        self.base: MobileBase | None = MobileBase(model) if MobileBase.in_model(model) else None
 
     def objects_in_model(self) -> list[str]:
         """Names of the object bodies of the current model (each has a free joint of the same name)."""
@@ -212,16 +218,17 @@ class TabletopWorld:
         self._pushes = []
         data.xfrc_applied[:] = 0.0
         data.ctrl[:] = 0.0  # the scene's other actuators (a cart's motor) start idle
-        data.qpos[self._arm_qpos_adr] = HOME_JOINT_POSITIONS
+        home = np.array(self.scene.home_joints, dtype=float)
+        data.qpos[self._arm_qpos_adr] = home
         opening = self.scene.home_gripper_opening  # open, unless the scene's tool is held between the fingers
         data.qpos[self._finger_qpos_adr] = opening / 2
         self._trajectory: JointTrajectory | None = None
         self._arm_command_serial += 1
-        self._hold_positions = HOME_JOINT_POSITIONS.copy()
+        self._hold_positions = home.copy()
         self._gripper_target = opening
         self._gripper_reference = opening
         self._set_gripper_force(GRIPPER_DEFAULT_FORCE)
-        data.ctrl[self._arm_actuator_ids] = HOME_JOINT_POSITIONS
+        data.ctrl[self._arm_actuator_ids] = home
         data.ctrl[self._gripper_actuator_id] = opening
 
     # -------------------------------------------------------------------------------------------- stepping
@@ -238,20 +245,25 @@ class TabletopWorld:
         """Advance the physics by n steps, updating the arm and gripper references every step."""
         with self.lock:
             model, data = self.model, self.data
-            ink = self._ink
-            if self._trajectory is None and self._gripper_reference == self._gripper_target and not self._pushes:
+            ink, base = self._ink, self.base
+            base_moving = base is not None and base.moving
+            if self._trajectory is None and self._gripper_reference == self._gripper_target and not self._pushes \
+                    and not base_moving:
                 # Nothing to interpolate: the references are constant, let MuJoCo run the steps in one call (the
                 # arm holds still, so the tool touches the board, if at all, where it did at the last step).
                 mujoco.mj_step(model, data, nstep=n)
                 if ink is not None:
                     ink.update(data)
                 return
-            # The trajectory's references for every step of the chunk at once (the time after each step).
-            references = self._trajectory.sample_many(data.time + model.opt.timestep * np.arange(1, n + 1)) \
-                if self._trajectory is not None else None
+            # The trajectories' references for every step of the chunk at once (the time after each step).
+            times = data.time + model.opt.timestep * np.arange(1, n + 1)
+            references = self._trajectory.sample_many(times) if self._trajectory is not None else None
+            base_references = base.references_for(times) if base_moving else None
             for k in range(n):
                 self._update_references(None if references is None else
                                         (references[0][k], references[1][k], references[2][k]))
+                if base_references is not None and base.moving:
+                    base.update(data, base_references[0][k], base_references[1][k])
                 if self._pushes:
                     self._apply_pushes()
                 mujoco.mj_step(model, data)
@@ -394,6 +406,41 @@ class TabletopWorld:
             pose[:3, :3] = self.data.site_xmat[site_id].reshape(3, 3)
             pose[:3, 3] = self.data.site_xpos[site_id]
             return pose
+
+    # ------------------------------------------------------------------------------------------ mobile base
+    def _require_base(self) -> MobileBase:
+        if self.base is None:
+            raise ValueError(f'scene {self.scene_name!r} has no mobile base')
+        return self.base
+
+    def base_pose(self) -> np.ndarray:
+        """(x [m], y [m], yaw [rad, not wrapped]) of the mobile base; ValueError in a scene without one."""
+        with self.lock:
+            return self._require_base().positions(self.data)
+
+    def base_velocity(self) -> np.ndarray:
+        """(x', y' [m/s], yaw' [rad/s]) of the mobile base in the world frame."""
+        with self.lock:
+            return self._require_base().velocities(self.data)
+
+    def base_reference(self) -> tuple[np.ndarray, np.ndarray]:
+        """The base servos' reference now (position, velocity)."""
+        with self.lock:
+            return self._require_base().reference(self.time)
+
+    def follow_base_trajectory(self, times: Sequence[float], positions: Sequence[Sequence[float]],
+                               velocities: Sequence[Sequence[float]] | None = None) -> float:
+        """Make the base track a timed (x, y, yaw) trajectory (as follow_trajectory does for the arm); returns its
+        end time on the simulation clock [s]."""
+        with self.lock:
+            return self._require_base().follow(self.time, np.asarray(times, dtype=float),
+                                               np.asarray(positions, dtype=float),
+                                               None if velocities is None else np.asarray(velocities, dtype=float))
+
+    def hold_base(self) -> None:
+        """Stop the base's trajectory; the base holds the pose it has now (its servos brake it)."""
+        with self.lock:
+            self._require_base().hold_here(self.data)
 
     # ------------------------------------------------------------------------------- torque control, joints, pushes
     def set_arm_torque_mode(self, enabled: bool) -> None:

@@ -1,0 +1,125 @@
+"""navigation: the Navigate action (/cap/control/navigate) over the mobile base's FollowJointTrajectory action.
+
+The work is cap_control.navigation_executor's: this node binds its port to ROS (the simulator's base trajectory
+action, the base's joints in /joint_states) and serves the Navigate action with it: a goal names a location of the
+kitchen (location_name) or a pose in the map frame; feedback carries the base's pose, the time since the goal
+began, the time and distance left, and the recoveries made; a cancel of the goal or a message on the stop topic
+halts the base where it is (the goal ends CANCELED, aborted for a stop). Error codes are nav2's NavigateToPose
+codes and this project's (UNKNOWN_LOCATION, UNREACHABLE, CANCELLED). Parameters are declared from
+NavigationConfig, whose fields hold every default.
+"""
+from __future__ import annotations
+
+import math
+from concurrent.futures import Future
+
+import numpy as np
+from cap_kitchen.robot import BASE_JOINT_NAMES
+from cap_ros_common.actions import RESULT_TIMEOUT_S, ActionClient
+from cap_ros_common.parameters import declare_config
+from cap_ros_common.time import duration_msg
+from geometry_msgs.msg import PoseStamped
+from rclpy.action import ActionServer
+from trajectory_msgs.msg import JointTrajectoryPoint
+
+from cap_control import ros_conversions as conv
+from cap_control.arm_node import ActionGoal, GoalNode, spin_node
+from cap_control.navigation_executor import (
+    Base, NavigateProgress, NavigateRequest, NavigationConfig, NavigationExecutor,
+)
+from cap_control.ports import PendingGoal
+from cap_interfaces.action import FollowJointTrajectory, Navigate
+from cap_interfaces.msg import GraphNames, JointTolerance
+
+MAP_FRAME = 'map'
+
+
+class _BasePort(Base):
+    server_description = f'the base action {GraphNames.SIM_FOLLOW_BASE_TRAJECTORY_ACTION}'
+
+    def __init__(self, node: 'NavigationNode'):
+        self._node = node
+
+    def server_ready(self) -> Future:
+        return self._node.when_ready(self._node.base_client.server_is_ready)
+
+    def pose(self) -> Future:
+        return self._node.joints(BASE_JOINT_NAMES)
+
+    def latest_pose(self) -> np.ndarray | None:
+        msg = self._node.joint_state()
+        return None if msg is None else conv.joint_positions(msg, BASE_JOINT_NAMES)
+
+    def follow(self, times: np.ndarray, positions: np.ndarray, velocities: np.ndarray,
+               path_tolerance: float) -> PendingGoal:
+        goal = FollowJointTrajectory.Goal()
+        goal.trajectory.joint_names = list(BASE_JOINT_NAMES)
+        goal.trajectory.points = [JointTrajectoryPoint(positions=p.tolist(), velocities=v.tolist(),
+                                                       time_from_start=duration_msg(float(t)))
+                                  for t, p, v in zip(times, positions, velocities)]
+        goal.path_tolerance = [JointTolerance(name=name, position=path_tolerance, velocity=-1.0, acceleration=-1.0)
+                               for name in BASE_JOINT_NAMES]
+        return ActionGoal(self._node.base_client, goal, conv.arm_outcome)
+
+
+def pose_msg(pose: np.ndarray, stamp) -> PoseStamped:
+    msg = PoseStamped()
+    msg.header.frame_id, msg.header.stamp = MAP_FRAME, stamp
+    msg.pose.position.x, msg.pose.position.y = float(pose[0]), float(pose[1])
+    msg.pose.orientation.z, msg.pose.orientation.w = math.sin(pose[2] / 2), math.cos(pose[2] / 2)
+    return msg
+
+
+def yaw_of(msg: PoseStamped) -> float:
+    q = msg.pose.orientation
+    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+
+
+class NavigationNode(GoalNode):
+    goal_description = 'navigation'
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('navigation', **kwargs)
+        self.config = declare_config(self, NavigationConfig)
+        self.set_timeouts(self.config.server_timeout, self.config.service_timeout)
+        self.base_client = ActionClient(self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_BASE_TRAJECTORY_ACTION,
+                                        callback_group=self.callbacks)
+        self.navigation = NavigationExecutor(_BasePort(self), self.config, log=self._log)
+        self._server = ActionServer(self, Navigate, GraphNames.NAVIGATE_ACTION, self._execute,
+                                    goal_callback=self._on_goal, cancel_callback=self._on_cancel,
+                                    result_timeout=RESULT_TIMEOUT_S, callback_group=self.callbacks)
+        self.get_logger().info('navigation ready')
+
+    def destroy_node(self) -> None:
+        self._server.destroy()
+        self.base_client.destroy()
+        super().destroy_node()
+
+    def _execute(self, goal_handle) -> Navigate.Result:
+        goal = goal_handle.request
+        result = Navigate.Result()
+
+        def run(interruption):
+            position = goal.pose.pose.position
+            request = NavigateRequest(goal.location_name, (position.x, position.y, yaw_of(goal.pose)))
+            outcome = self.navigation.run(request, interruption,
+                                          lambda progress: self._feedback(goal_handle, progress))
+            result.error_code, result.error_msg = int(outcome.code), outcome.message
+            return outcome
+
+        return self.serve(goal_handle, result, run)
+
+    def _feedback(self, goal_handle, progress: NavigateProgress) -> None:
+        goal_handle.publish_feedback(Navigate.Feedback(
+            current_pose=pose_msg(progress.pose, self.get_clock().now().to_msg()),
+            navigation_time=duration_msg(progress.elapsed),
+            estimated_time_remaining=duration_msg(progress.time_remaining),
+            number_of_recoveries=int(progress.recoveries), distance_remaining=float(progress.distance_remaining)))
+
+
+def main(args=None) -> None:
+    spin_node(NavigationNode, args)
+
+
+if __name__ == '__main__':
+    main()
