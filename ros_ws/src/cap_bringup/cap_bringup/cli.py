@@ -9,7 +9,7 @@
     cap approve [--reject]                           approve (or reject) the program waiting for approval
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
     cap urdf > ur5e_gripper.urdf                     the robot's URDF, as /robot_description carries it
-    cap demo [whiteboard]                            the table-top demo (cap_bringup/demo.py), or the whiteboard one
+    cap demo [whiteboard|mobile]                     the table-top demo (cap_bringup/demo.py), or another domain's
     cap bench tabletop --trials 1                    the paper's table-top benchmark (cap bench: the others)
 
 Every command takes --namespace (the graph's names are relative; `cap send --namespace robot1 "..."` talks to the
@@ -601,8 +601,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     'cameras, commands, code, approval, stop')
     p_console.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_console.add_argument('--port', type=int, default=8765, help='port on 127.0.0.1; 0: a free one [8765]')
-    commands.add_parser('demo', help='run the table-top demo, or `cap demo whiteboard` the whiteboard session '
-                        '(options: cap demo [whiteboard] --help)', add_help=False)
+    commands.add_parser('demo', help='run the table-top demo, `cap demo whiteboard` the whiteboard session or `cap '
+                        'demo mobile` the mobile robot\'s commands (options: cap demo [whiteboard|mobile] --help)',
+                        add_help=False)
     commands.add_parser('bench', help='the paper\'s benchmarks: tabletop, codegen, humaneval, reasoning (cap bench '
                         '--help)', add_help=False)
     p_send = commands.add_parser('send', help='run a natural-language command and follow it to the end',

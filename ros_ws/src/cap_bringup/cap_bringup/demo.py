@@ -1,7 +1,8 @@
 """The table-top demo: a sequence of plain-language commands run through the whole graph in simulation.
 
     python -m cap_bringup.demo [--out DIR] [--backend cassette|http] [--cassette FILE] [--record] [--perception rgbd]
-    cap demo [tabletop] [...]         the same;  cap demo whiteboard [...]: the whiteboard session (whiteboard_demo.py)
+    cap demo [tabletop] [...]         the same;  cap demo whiteboard [...]: the whiteboard session (whiteboard_demo.py);
+                                      cap demo mobile [...]: the mobile robot's navigation commands (mobile_demo.py)
 
 By default every answer comes from the demo cassette of hand-written reference programs (no network, no model). With
 `--backend http` the same commands go to an OpenAI-compatible endpoint (CAP_LLM_BASE_URL, CAP_LLM_MODEL,
@@ -280,6 +281,9 @@ def main(argv=None) -> int:
     if argv[:1] == ['whiteboard']:  # `cap demo whiteboard`: the whiteboard domain's session
         from cap_bringup import whiteboard_demo
         return whiteboard_demo.main(argv[1:])
+    if argv[:1] == ['mobile']:  # `cap demo mobile`: the mobile domain's navigation commands
+        from cap_bringup import mobile_demo
+        return mobile_demo.main(argv[1:])
     if argv[:1] == ['tabletop']:
         argv = argv[1:]
     parser = argparse.ArgumentParser(prog='cap-demo', description=__doc__.split('\n\n')[0])

@@ -5,8 +5,10 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ElementTree
 
+import mujoco
 import numpy as np
 import pytest
+from cap_kitchen.robot import BASE_JOINT_NAMES
 
 from cap_control.kinematics import forward_kinematics
 from cap_sim_bridge.scenes import build_model
@@ -48,6 +50,8 @@ def _link_pose(urdf: ElementTree.Element, link: str, positions: dict[str, float]
         value = positions.get(joint.get('name'), 0.0)
         if joint.get('type') == 'revolute':
             motion[:3, :3] = _axis_angle(np.array([float(v) for v in joint.find('axis').get('xyz').split()]), value)
+        elif joint.get('type') == 'prismatic':
+            motion[:3, 3] = value * np.array([float(v) for v in joint.find('axis').get('xyz').split()])
         pose = pose @ step @ motion
     return pose
 
@@ -64,6 +68,25 @@ def test_the_urdf_chain_is_the_dh_chain_of_the_ur5e(urdf, seed):
     q = np.random.default_rng(seed).uniform(-math.pi, math.pi, 6)
     flange = _link_pose(urdf, 'flange', dict(zip(ARM_JOINT_NAMES, q)))
     assert np.allclose(flange, forward_kinematics(q, tool_offset=0.0), atol=1e-5)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_the_mobile_manipulators_urdf_moves_its_flange_where_the_simulator_does(seed):
+    """The kitchen's base joints (x, y and a yaw about the base's centre, off the arm's root frame) as a chain."""
+    model = build_model([], 'kitchen')
+    urdf = ElementTree.fromstring(robot_urdf(model))
+    rng = np.random.default_rng(seed)
+    positions = dict(zip(BASE_JOINT_NAMES, [*rng.uniform(-2, 2, 2), rng.uniform(-math.pi, math.pi)]))
+    positions.update(zip(ARM_JOINT_NAMES, rng.uniform(-math.pi, math.pi, 6)))
+    data = mujoco.MjData(model)
+    for name, value in positions.items():
+        data.qpos[model.jnt_qposadr[model.joint(name).id]] = value
+    mujoco.mj_kinematics(model, data)
+    expected = np.eye(4)
+    expected[:3, :3], expected[:3, 3] = data.body('flange').xmat.reshape(3, 3), data.body('flange').xpos
+    assert np.allclose(_link_pose(urdf, 'flange', positions), expected, atol=1e-4)  # URDF's 6 digits
+    moving = [joint.get('name') for joint in urdf.findall('joint') if joint.get('type') != 'fixed']
+    assert moving[:3] == list(BASE_JOINT_NAMES)
 
 
 def test_rpy_of_a_quaternion():

@@ -92,8 +92,9 @@ class Base(abc.ABC):
 
 @dataclasses.dataclass(frozen=True)
 class NavigateRequest:
-    location_name: str = ''  # a named location of the kitchen; empty: the pose
+    location_name: str = ''  # a named location of the kitchen; empty: the pose (or the poses)
     pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # x, y [m], yaw [rad] in the map (world) frame
+    poses: tuple[tuple[float, float, float], ...] = ()  # through these in order, instead of one goal
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,8 +102,9 @@ class NavigateProgress:
     pose: np.ndarray  # (x, y, yaw) now
     elapsed: float  # [s] wall time since the goal began
     time_remaining: float  # [s] of the trajectory, simulated
-    distance_remaining: float  # [m] along the path
+    distance_remaining: float  # [m] along the path to the pose being driven to
     recoveries: int
+    poses_remaining: int = 0  # after the one being driven to
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,6 +118,16 @@ class NavigateOutcome:
     path: np.ndarray | None = None  # the last path planned (N, 2)
 
 
+@dataclasses.dataclass
+class _Trip:
+    """What one request's drives share: its start, its recoveries, the poses left, the last path planned."""
+
+    started: float  # [s] monotonic
+    recoveries: int = 0
+    poses_remaining: int = 0
+    path: np.ndarray | None = None
+
+
 class NavigationExecutor:
     def __init__(self, base: Base, config: NavigationConfig = NavigationConfig(),
                  log: Callable[[str, str], None] = lambda level, message: None) -> None:
@@ -124,79 +136,99 @@ class NavigationExecutor:
         self.log = log
         self.static_grid = config.grid()
 
-    def goal_pose(self, request: NavigateRequest) -> tuple[float, float, float]:
-        """The pose a request names; NavigationError UNKNOWN_LOCATION for a location the kitchen lacks."""
+    def goal_poses(self, request: NavigateRequest) -> list[tuple[float, float, float]]:
+        """The poses a request names, in order; NavigationError UNKNOWN_LOCATION for a location the kitchen lacks,
+        UNREACHABLE for a pose that is not finite."""
         if request.location_name.strip():
             try:
-                return layout.location(request.location_name).approach()
+                return [layout.location(request.location_name).approach()]
             except layout.UnknownLocationError as error:
                 raise NavigationError(NavigateErrorCode.UNKNOWN_LOCATION, str(error)) from None
-        x, y, yaw = request.pose
-        if not all(math.isfinite(v) for v in (x, y, yaw)):
-            raise NavigationError(NavigateErrorCode.UNREACHABLE, 'the goal pose has values that are not finite')
-        return float(x), float(y), float(yaw)
+        poses = list(request.poses) if request.poses else [request.pose]
+        for x, y, yaw in poses:
+            if not all(math.isfinite(v) for v in (x, y, yaw)):
+                raise NavigationError(NavigateErrorCode.UNREACHABLE, 'a goal pose has values that are not finite')
+        return [(float(x), float(y), float(yaw)) for x, y, yaw in poses]
 
     def run(self, request: NavigateRequest, interruption: Interruption,
             feedback: Callable[[NavigateProgress], None] = lambda progress: None) -> NavigateOutcome:
         config = self.config
         run = GoalRun(interruption, WaitTimeouts(config.service_timeout, config.server_timeout),
                       NavigateErrorCode.TIMEOUT, NavigateErrorCode.UNKNOWN)
-        started = time.monotonic()
-        recoveries, path, pose = 0, None, None
+        trip = _Trip(time.monotonic())
         try:
-            goal = self.goal_pose(request)
-            run.available(self.base.server_ready(), self.base.server_description)
-            grid = self.static_grid
-            while True:
-                pose = run.answer(self.base.pose(), config.server_timeout, 'the base\'s joint state')
-                path = plan_path(grid, pose, goal)
-                follower = PathFollower(path, goal[2], config.limits())
-                poses, commands = follow_on_ideal_base(follower, (pose[0], pose[1], wrap_angle(pose[2])),
-                                                       FOLLOWER_PERIOD)
-                if not commands or not commands[-1].done:
-                    raise NavigationError(NavigateErrorCode.UNREACHABLE, 'the path follower did not reach the goal')
-                times, positions, velocities = base_trajectory(poses, commands, FOLLOWER_PERIOD, float(pose[2]),
-                                                               POINT_PERIOD)
-                self.log('info', f'driving {len(path) - 1} leg(s) to ({goal[0]:.2f}, {goal[1]:.2f}, '
-                                 f'{goal[2]:.2f}) in {times[-1]:.1f} s')
-                outcome = self._drive(run, times, positions, velocities, poses, started, recoveries, feedback)
-                if outcome.result == ArmResult.SUCCEEDED:
-                    break
-                if outcome.result != ArmResult.TOLERANCE_VIOLATED:
-                    raise Failed(NavigateErrorCode.UNKNOWN, f'the base failed: {outcome.message}')
-                if recoveries >= config.max_recoveries:
+            goals = self.goal_poses(request)
+            # Every pose is checked before the base moves: a tour with one pose in furniture is refused whole.
+            for goal in goals:
+                if not self.static_grid.is_free(goal[:2]):
                     raise NavigationError(NavigateErrorCode.UNREACHABLE,
-                                          f'the base was blocked {recoveries + 1} times on the way')
-                recoveries += 1
-                pose = run.answer(self.base.pose(), config.server_timeout, 'the base\'s joint state')
-                grid = self._mark_blocked(grid, pose)
-                self.log('warn', f'the base was blocked at ({pose[0]:.2f}, {pose[1]:.2f}) ({outcome.message}); '
-                                 f'planning again (recovery {recoveries})')
+                                          f'the goal ({goal[0]:.2f}, {goal[1]:.2f}) is inside an obstacle or closer '
+                                          f'to one than the base allows')
+            run.available(self.base.server_ready(), self.base.server_description)
+            messages = []
+            for index, goal in enumerate(goals):
+                trip.poses_remaining = len(goals) - index - 1
+                messages.append(self._reach(run, goal, trip, feedback))
             pose = run.answer(self.base.pose(), config.server_timeout, 'the base\'s joint state')
-            error = math.dist(pose[:2], goal[:2])
-            yaw_error = abs(wrap_angle(pose[2] - goal[2]))
-            if error > config.position_tolerance or yaw_error > config.yaw_tolerance:
-                raise Failed(NavigateErrorCode.UNKNOWN, f'the base stopped {error:.3f} m and {yaw_error:.3f} rad '
-                                                        'from the goal')
-            return NavigateOutcome(Ending.SUCCEEDED, NavigateErrorCode.NONE,
-                                   f'reached ({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f}) within {error:.3f} m and '
-                                   f'{yaw_error:.3f} rad', pose, recoveries, path=path)
+            message = messages[0] if len(messages) == 1 else f'reached all {len(goals)} poses; the last {messages[-1]}'
+            return NavigateOutcome(Ending.SUCCEEDED, NavigateErrorCode.NONE, message, pose, trip.recoveries,
+                                   path=trip.path)
         except Interrupted:
             confirmed = run.cancel_active_goal()
             ending = interruption.reason or Ending.CANCELLED
             return NavigateOutcome(ending, NavigateErrorCode.CANCELLED, f'{ending.value}: the base holds where it '
-                                   'stopped', self.base.latest_pose(), recoveries, confirmed, path)
+                                   'stopped', self.base.latest_pose(), trip.recoveries, confirmed, trip.path)
         except NavigationError as error:
-            return NavigateOutcome(Ending.FAILED, error.code, str(error), self.base.latest_pose(), recoveries,
-                                   path=path)
+            return NavigateOutcome(Ending.FAILED, error.code, str(error), self.base.latest_pose(), trip.recoveries,
+                                   path=trip.path)
         except Failed as failure:
             run.cancel_active_goal()
             return NavigateOutcome(Ending.FAILED, failure.code, failure.message, self.base.latest_pose(),
-                                   recoveries, path=path)
+                                   trip.recoveries, path=trip.path)
+
+    def _reach(self, run: GoalRun, goal: tuple[float, float, float], trip: '_Trip',
+               feedback: Callable[[NavigateProgress], None]) -> str:
+        """Drive to one goal pose, planning again around blocked spots; the message of its arrival."""
+        config = self.config
+        grid = self.static_grid
+        recoveries_here = 0
+        while True:
+            pose = run.answer(self.base.pose(), config.server_timeout, 'the base\'s joint state')
+            trip.path = path = plan_path(grid, pose, goal)
+            follower = PathFollower(path, goal[2], config.limits())
+            poses, commands = follow_on_ideal_base(follower, (pose[0], pose[1], wrap_angle(pose[2])),
+                                                   FOLLOWER_PERIOD)
+            if not commands or not commands[-1].done:
+                raise NavigationError(NavigateErrorCode.UNREACHABLE, 'the path follower did not reach the goal')
+            times, positions, velocities = base_trajectory(poses, commands, FOLLOWER_PERIOD, float(pose[2]),
+                                                           POINT_PERIOD)
+            self.log('info', f'driving {len(path) - 1} leg(s) to ({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f}) in '
+                             f'{times[-1]:.1f} s')
+            outcome = self._drive(run, times, positions, velocities, poses, trip, feedback)
+            if outcome.result == ArmResult.SUCCEEDED:
+                break
+            if outcome.result != ArmResult.TOLERANCE_VIOLATED:
+                raise Failed(NavigateErrorCode.UNKNOWN, f'the base failed: {outcome.message}')
+            if recoveries_here >= config.max_recoveries:
+                raise NavigationError(NavigateErrorCode.UNREACHABLE,
+                                      f'the base was blocked {recoveries_here + 1} times on the way')
+            recoveries_here += 1
+            trip.recoveries += 1
+            pose = run.answer(self.base.pose(), config.server_timeout, 'the base\'s joint state')
+            grid = self._mark_blocked(grid, pose)
+            self.log('warn', f'the base was blocked at ({pose[0]:.2f}, {pose[1]:.2f}) ({outcome.message}); '
+                             f'planning again (recovery {trip.recoveries})')
+        pose = run.answer(self.base.pose(), config.server_timeout, 'the base\'s joint state')
+        error = math.dist(pose[:2], goal[:2])
+        yaw_error = abs(wrap_angle(pose[2] - goal[2]))
+        if error > config.position_tolerance or yaw_error > config.yaw_tolerance:
+            raise Failed(NavigateErrorCode.UNKNOWN, f'the base stopped {error:.3f} m and {yaw_error:.3f} rad from '
+                                                    f'the goal')
+        return (f'reached ({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f}) within {error:.3f} m and {yaw_error:.3f} '
+                f'rad')
 
     def _drive(self, run: GoalRun, times: np.ndarray, positions: np.ndarray, velocities: np.ndarray,
-               poses: np.ndarray, started: float, recoveries: int,
-               feedback: Callable[[NavigateProgress], None]) -> ArmOutcome:
+               poses: np.ndarray, trip: '_Trip', feedback: Callable[[NavigateProgress], None]) -> ArmOutcome:
         """Send one trajectory and wait for its end, sending feedback meanwhile."""
         config = self.config
         goal = self.base.follow(times, positions, velocities, config.path_tolerance)
@@ -219,8 +251,9 @@ class NavigationExecutor:
             if now is not None:
                 nearest = int(np.argmin(np.sum((poses[:, :2] - now[:2]) ** 2, axis=1)))
                 elapsed = nearest * FOLLOWER_PERIOD
-                feedback(NavigateProgress(now, time.monotonic() - started, max(0.0, float(times[-1]) - elapsed),
-                                          float(travelled[-1] - travelled[nearest]), recoveries))
+                feedback(NavigateProgress(now, time.monotonic() - trip.started, max(0.0, float(times[-1]) - elapsed),
+                                          float(travelled[-1] - travelled[nearest]), trip.recoveries,
+                                          trip.poses_remaining))
 
     def _mark_blocked(self, grid: OccupancyGrid, pose: np.ndarray) -> OccupancyGrid:
         """The grid with a disc ahead of the base (where it was pushing against something) occupied, inflated."""

@@ -1,12 +1,13 @@
-"""navigation: the Navigate action (/cap/control/navigate) over the mobile base's FollowJointTrajectory action.
+"""navigation: the Navigate and NavigateThroughPoses actions (/cap/control/navigate, .../navigate_through_poses)
+over the mobile base's FollowJointTrajectory action, and the base's pose (/cap/control/get_base_pose).
 
 The work is cap_control.navigation_executor's: this node binds its port to ROS (the simulator's base trajectory
-action, the base's joints in /joint_states) and serves the Navigate action with it: a goal names a location of the
-kitchen (location_name) or a pose in the map frame; feedback carries the base's pose, the time since the goal
-began, the time and distance left, and the recoveries made; a cancel of the goal or a message on the stop topic
-halts the base where it is (the goal ends CANCELED, aborted for a stop). Error codes are nav2's NavigateToPose
-codes and this project's (UNKNOWN_LOCATION, UNREACHABLE, CANCELLED). Parameters are declared from
-NavigationConfig, whose fields hold every default.
+action, the base's joints in /joint_states) and serves the actions with it, one goal at a time: a Navigate goal
+names a location of the kitchen (location_name) or a pose in the map frame, a NavigateThroughPoses goal poses to
+reach in order; feedback carries the base's pose, the time since the goal began, the time and distance left, the
+recoveries made (and the poses left); a cancel of the goal or a message on the stop topic halts the base where it
+is (the goal ends CANCELED, aborted for a stop). Error codes are nav2's and this project's (UNKNOWN_LOCATION,
+UNREACHABLE, CANCELLED). Parameters are declared from NavigationConfig, whose fields hold every default.
 """
 from __future__ import annotations
 
@@ -24,12 +25,14 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 
 from cap_control import ros_conversions as conv
 from cap_control.arm_node import ActionGoal, GoalNode, spin_node
+from cap_control.navigation import NavigateErrorCode
 from cap_control.navigation_executor import (
-    Base, NavigateProgress, NavigateRequest, NavigationConfig, NavigationExecutor,
+    Base, NavigateOutcome, NavigateProgress, NavigateRequest, NavigationConfig, NavigationExecutor,
 )
-from cap_control.ports import PendingGoal
-from cap_interfaces.action import FollowJointTrajectory, Navigate
+from cap_control.ports import Ending, PendingGoal
+from cap_interfaces.action import FollowJointTrajectory, Navigate, NavigateThroughPoses
 from cap_interfaces.msg import GraphNames, JointTolerance
+from cap_interfaces.srv import GetBasePose
 
 MAP_FRAME = 'map'
 
@@ -85,15 +88,32 @@ class NavigationNode(GoalNode):
         self.base_client = ActionClient(self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_BASE_TRAJECTORY_ACTION,
                                         callback_group=self.callbacks)
         self.navigation = NavigationExecutor(_BasePort(self), self.config, log=self._log)
-        self._server = ActionServer(self, Navigate, GraphNames.NAVIGATE_ACTION, self._execute,
-                                    goal_callback=self._on_goal, cancel_callback=self._on_cancel,
-                                    result_timeout=RESULT_TIMEOUT_S, callback_group=self.callbacks)
+        self._servers = [
+            ActionServer(self, Navigate, GraphNames.NAVIGATE_ACTION, self._execute,
+                         goal_callback=self._on_goal, cancel_callback=self._on_cancel,
+                         result_timeout=RESULT_TIMEOUT_S, callback_group=self.callbacks),
+            ActionServer(self, NavigateThroughPoses, GraphNames.NAVIGATE_THROUGH_POSES_ACTION,
+                         self._execute_through_poses, goal_callback=self._on_goal, cancel_callback=self._on_cancel,
+                         result_timeout=RESULT_TIMEOUT_S, callback_group=self.callbacks)]
+        self.create_service(GetBasePose, GraphNames.BASE_POSE_SERVICE, self._on_base_pose,
+                            callback_group=self.callbacks)
         self.get_logger().info('navigation ready')
 
     def destroy_node(self) -> None:
-        self._server.destroy()
+        for server in self._servers:
+            server.destroy()
         self.base_client.destroy()
         super().destroy_node()
+
+    def _on_base_pose(self, _request, response: GetBasePose.Response) -> GetBasePose.Response:
+        msg = self.joint_state()
+        pose = None if msg is None else conv.joint_positions(msg, BASE_JOINT_NAMES)
+        if pose is None:
+            response.success, response.message = False, f'no joint state with the base\'s joints {BASE_JOINT_NAMES} yet'
+            return response
+        response.success = True
+        response.pose = pose_msg(pose, msg.header.stamp)
+        return response
 
     def _execute(self, goal_handle) -> Navigate.Result:
         goal = goal_handle.request
@@ -109,12 +129,34 @@ class NavigationNode(GoalNode):
 
         return self.serve(goal_handle, result, run)
 
-    def _feedback(self, goal_handle, progress: NavigateProgress) -> None:
-        goal_handle.publish_feedback(Navigate.Feedback(
-            current_pose=pose_msg(progress.pose, self.get_clock().now().to_msg()),
-            navigation_time=duration_msg(progress.elapsed),
-            estimated_time_remaining=duration_msg(progress.time_remaining),
-            number_of_recoveries=int(progress.recoveries), distance_remaining=float(progress.distance_remaining)))
+    def _execute_through_poses(self, goal_handle) -> NavigateThroughPoses.Result:
+        goal = goal_handle.request
+        result = NavigateThroughPoses.Result()
+
+        def run(interruption):
+            poses = tuple((p.pose.position.x, p.pose.position.y, yaw_of(p)) for p in goal.poses)
+            if not poses:
+                outcome = NavigateOutcome(Ending.FAILED, NavigateErrorCode.UNREACHABLE, 'the goal has no poses')
+                result.error_code, result.error_msg = int(outcome.code), outcome.message
+                return outcome
+            outcome = self.navigation.run(NavigateRequest(poses=poses), interruption,
+                                          lambda progress: self._feedback(goal_handle, progress, through=True))
+            result.error_code, result.error_msg = int(outcome.code), outcome.message
+            return outcome
+
+        return self.serve(goal_handle, result, run)
+
+    def _feedback(self, goal_handle, progress: NavigateProgress, through: bool = False) -> None:
+        fields = dict(current_pose=pose_msg(progress.pose, self.get_clock().now().to_msg()),
+                      navigation_time=duration_msg(progress.elapsed),
+                      estimated_time_remaining=duration_msg(progress.time_remaining),
+                      number_of_recoveries=int(progress.recoveries),
+                      distance_remaining=float(progress.distance_remaining))
+        if through:
+            goal_handle.publish_feedback(NavigateThroughPoses.Feedback(
+                number_of_poses_remaining=int(progress.poses_remaining), **fields))
+        else:
+            goal_handle.publish_feedback(Navigate.Feedback(**fields))
 
 
 def main(args=None) -> None:

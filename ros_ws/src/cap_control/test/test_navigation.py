@@ -34,7 +34,8 @@ def test_every_location_is_reached_by_a_free_path_not_much_longer_than_the_strai
 
 def test_a_goal_inside_furniture_or_too_close_to_it_is_unreachable(kitchen):
     _, grid = kitchen
-    for goal in (location('table').centre, (1.6, 0.6 - 0.4 - 0.1)):  # in the table; 10 cm from its edge
+    table = location('table')
+    for goal in (table.centre, (table.centre[0], table.footprint[1] - 0.1)):  # in the table; 10 cm from its edge
         with pytest.raises(NavigationError) as error:
             plan_path(grid, START_POSE, goal)
         assert error.value.code == NavigateErrorCode.UNREACHABLE

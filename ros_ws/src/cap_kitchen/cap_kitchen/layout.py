@@ -58,10 +58,10 @@ class Furniture:
 
 FURNITURE: tuple[Furniture, ...] = (
     Furniture('countertop', (-1.2, 2.69), (3.0, 0.61, 0.91), '-y'),
-    Furniture('table', (1.6, 0.6), (1.4, 0.8, 0.75), '-y'),
-    Furniture('desk', (3.0, -2.4), (1.2, 0.6, 0.75), '+y'),
-    Furniture('office chair', (-0.6, -0.9), (0.62, 0.62, 1.05), '+y', kind='seat'),
-    Furniture('chair', (2.55, 0.6), (0.45, 0.45, 0.9), '+x', kind='seat'),
+    Furniture('table', (2.0, 1.0), (1.4, 0.8, 0.75), '-y'),
+    Furniture('desk', (3.2, -2.4), (1.2, 0.6, 0.75), '+y'),
+    Furniture('office chair', (-0.8, -0.6), (0.62, 0.62, 1.05), '+y', kind='seat'),
+    Furniture('chair', (1.6, -1.6), (0.45, 0.45, 0.9), '+y', kind='seat'),
     Furniture('barstool', (-2.6, 0.9), (0.4, 0.4, 0.76), '+x', round=True, kind='seat'),
     Furniture('compost bin', (-3.7, -0.6), (0.35, 0.35, 0.6), '+x', kind='bin'),
     Furniture('recycle bin', (-3.7, -1.3), (0.35, 0.35, 0.6), '+x', kind='bin'),

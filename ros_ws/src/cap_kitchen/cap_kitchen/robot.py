@@ -25,5 +25,12 @@ HEAD_CAMERA_POSITION: tuple[float, float, float] = (-0.2, 0.0, 1.45)
 HEAD_CAMERA_PITCH = 0.6  # [rad] below the horizon
 HEAD_CAMERA_FOVY = 58.0  # [deg] vertical field of view (a common RGB-D camera's)
 
-__all__ = ['ARM_MOUNT', 'BASE_CLEARANCE', 'BASE_HEIGHT', 'BASE_JOINT_NAMES', 'BASE_RADIUS', 'HEAD_CAMERA',
+# A camera that follows the robot from behind and above at a fixed offset in the room (for videos of a run).
+FOLLOW_CAMERA = 'follow'
+FOLLOW_CAMERA_OFFSET: tuple[float, float, float] = (-2.2, -2.2, 2.6)  # [m] from the base's centre on the floor
+FOLLOW_CAMERA_TARGET_HEIGHT = 0.6  # [m] of the point on the robot it looks at
+FOLLOW_CAMERA_FOVY = 60.0  # [deg]
+
+__all__ = ['ARM_MOUNT', 'BASE_CLEARANCE', 'BASE_HEIGHT', 'BASE_JOINT_NAMES', 'BASE_RADIUS', 'FOLLOW_CAMERA',
+           'FOLLOW_CAMERA_FOVY', 'FOLLOW_CAMERA_OFFSET', 'FOLLOW_CAMERA_TARGET_HEIGHT', 'HEAD_CAMERA',
            'HEAD_CAMERA_FOVY', 'HEAD_CAMERA_PITCH', 'HEAD_CAMERA_POSITION', 'STOWED_JOINTS']

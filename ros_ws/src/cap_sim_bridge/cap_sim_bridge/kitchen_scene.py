@@ -13,11 +13,14 @@ import math
 from typing import Sequence
 
 import mujoco
-from cap_kitchen import layout, robot
+import numpy as np
+from cap_kitchen import layout, objects as kitchen_objects, robot
 
 from cap_sim_bridge import scene as objects_module
-from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge.scene import ObjectKind, ObjectSpec, object_geom, register_object_kind
 from cap_sim_bridge.scenes import MODELS_DIR, SceneSpec, spec_from_mjcf
+# The fruit kinds ("apple", ...) are the whiteboard scene's: importing it registers them.
+from cap_sim_bridge import whiteboard_scene  # noqa: F401
 
 KITCHEN = 'kitchen'
 BASE_BODY = 'mobile_base'
@@ -128,6 +131,16 @@ def _add_mobile_base(spec: mujoco.MjSpec) -> None:
     pitch = robot.HEAD_CAMERA_PITCH
     root.add_camera(name=robot.HEAD_CAMERA, pos=at(*robot.HEAD_CAMERA_POSITION),
                     xyaxes=[0, -1, 0, math.sin(pitch), 0, math.cos(pitch)], fovy=robot.HEAD_CAMERA_FOVY)
+    # The follow camera keeps its offset in the room and its orientation while the robot moves (MuJoCo's
+    # "trackcom" mode), looking at the robot from behind and above.
+    forward = -np.array(robot.FOLLOW_CAMERA_OFFSET) + [0, 0, robot.FOLLOW_CAMERA_TARGET_HEIGHT]
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0, 0, 1])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    follow = root.add_camera(name=robot.FOLLOW_CAMERA, pos=at(*robot.FOLLOW_CAMERA_OFFSET),
+                             xyaxes=[*right, *up], fovy=robot.FOLLOW_CAMERA_FOVY)
+    follow.mode = mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM
     for name, servo in ((joint_x, BASE_XY_SERVO), (joint_y, BASE_XY_SERVO), (joint_yaw, BASE_YAW_SERVO)):
         actuator = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
         actuator.set_to_position(kp=servo['kp'], kv=servo['kv'])
@@ -144,14 +157,40 @@ def build(objects: Sequence[ObjectSpec]) -> mujoco.MjSpec:
     return objects_module.add_objects(spec, objects)
 
 
+def _kind_geoms(kind: kitchen_objects.KitchenKind):
+    def add(body: mujoco.MjsBody, obj: ObjectSpec) -> None:
+        if kind.shape == 'cylinder':
+            object_geom(body, obj, name=obj.name, type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=list(kind.size),
+                        mass=kind.mass)
+        else:
+            object_geom(body, obj, name=obj.name, type=_BOX, size=list(kind.size), mass=kind.mass)
+    return add
+
+
+for _kind in kitchen_objects.KINDS.values():
+    register_object_kind(ObjectKind(_kind.name, _kind_geoms(_kind), _kind.resting_height, _kind.color_name))
+
+
+def default_objects(seed: int) -> list[ObjectSpec]:
+    """The seed's episode (cap_kitchen.objects.default_objects): snacks, drinks and fruit."""
+    return [ObjectSpec.from_name(name) for name in kitchen_objects.default_objects(seed)]
+
+
+def spawn_positions(specs: Sequence[ObjectSpec], seed: int) -> list[tuple[float, float, float]]:
+    """(x, y, height of the surface there) for every object: on the furniture tops, or where a spec says."""
+    return kitchen_objects.spawn_positions(len(specs), seed, [spec.position for spec in specs])
+
+
 def initialize(model: mujoco.MjModel, data: mujoco.MjData, seed: int) -> None:
     """The base at the layout's start pose (the world's base then holds there)."""
     for name, value in zip(robot.BASE_JOINT_NAMES, layout.START_POSE):
         data.qpos[model.jnt_qposadr[model.joint(name).id]] = value
 
 
-SCENE = SceneSpec(KITCHEN, build=build, camera_names=(robot.HEAD_CAMERA,), home_joints=robot.STOWED_JOINTS,
-                  initialize=initialize,
-                  description='a kitchen-office with counters, tables, chairs and bins; the UR5e on a mobile base')
+SCENE = SceneSpec(KITCHEN, build=build, default_objects=default_objects, spawn_positions=spawn_positions,
+                  camera_names=(robot.HEAD_CAMERA,), home_joints=robot.STOWED_JOINTS, initialize=initialize,
+                  visibility_camera=robot.HEAD_CAMERA,
+                  description='a kitchen-office with counters, tables, chairs, bins, snacks, drinks and fruit; the '
+                              'UR5e on a mobile base')
 
 __all__ = ['BASE_BODY', 'KITCHEN', 'SCENE', 'build']

@@ -36,7 +36,7 @@ def object_state_msg(state: ObjectState) -> ObjectStateMsg:
                                z=state.orientation_xyzw[2], w=state.orientation_xyzw[3]),
         bbox_min=Point(x=state.bbox_min[0], y=state.bbox_min[1], z=state.bbox_min[2]),
         bbox_max=Point(x=state.bbox_max[0], y=state.bbox_max[1], z=state.bbox_max[2]),
-        visible=True)
+        visible=state.visible)
 
 
 def object_spec(msg: ObjectSpecMsg) -> ObjectSpec:

@@ -41,13 +41,16 @@ class SceneSpec:
     """One scene. build(objects) returns the uncompiled model with those objects added (the world compiles it).
 
     default_objects(seed): the objects of a reset that names none. spawn_positions(objects, seed): an (x, y) per
-    object (objects with a position keep it). camera_names: the cameras the bridge publishes by default.
+    object (objects with a position keep it), or (x, y, z) with the height of the surface it stands on (otherwise
+    surface_z). camera_names: the cameras the bridge publishes by default. visibility_camera: the camera whose view
+    decides an object's `visible` flag in the ground truth (by ray tests against the scene); None: every object
+    counts as visible.
     """
 
     name: str
     build: Callable[[Sequence[ObjectSpec]], mujoco.MjSpec]
     default_objects: Callable[[int], list[ObjectSpec]] = lambda seed: []
-    spawn_positions: Callable[[Sequence[ObjectSpec], int], list[tuple[float, float]]] = \
+    spawn_positions: Callable[[Sequence[ObjectSpec], int], list[tuple[float, ...]]] = \
         objects_module.sample_spawn_positions
     camera_names: tuple[str, ...] = ()
     description: str = ''
@@ -55,6 +58,7 @@ class SceneSpec:
     ink: InkSpec | None = None  # a surface the tool draws on (cap_sim_bridge.ink), if the scene has one
     home_gripper_opening: float = GRIPPER_MAX_OPENING  # the fingers' opening at reset [m] (open, by default)
     home_joints: tuple[float, ...] = tuple(REST_JOINTS)  # the arm's joints at reset [rad]
+    visibility_camera: str | None = None
     # initialize(model, data, seed): the scene's own seeded start state after the robot and objects are placed
     # (e.g. a cart-pole's initial lean); None: nothing.
     initialize: Callable[[mujoco.MjModel, mujoco.MjData, int], None] | None = None

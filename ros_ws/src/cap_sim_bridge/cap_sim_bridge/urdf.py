@@ -25,6 +25,7 @@ _BOX, _SPHERE, _CYLINDER, _CAPSULE = (int(kind) for kind in (
     mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_SPHERE, mujoco.mjtGeom.mjGEOM_CYLINDER,
     mujoco.mjtGeom.mjGEOM_CAPSULE))
 _HINGE, _SLIDE = int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)
+_JOINT_TRANSMISSION = int(mujoco.mjtTrn.mjTRN_JOINT)  # an actuator on a joint (the gripper's is on a tendon)
 
 
 def _numbers(values: Sequence[float]) -> str:
@@ -105,38 +106,64 @@ def _link(model: mujoco.MjModel, body: int, name: str) -> ElementTree.Element:
     return link
 
 
-def _joint(model: mujoco.MjModel, body: int, parent_link: str, child_link: str) -> ElementTree.Element:
-    count = model.body_jntnum[body]
-    if count > 1:
-        raise ValueError(f'body {child_link!r} has {count} joints; a URDF link moves by one')
-    if count == 0:
-        joint = ElementTree.Element('joint', name=f'{parent_link}_to_{child_link}', type='fixed')
-    else:
-        index = model.body_jntadr[body]
-        kind = int(model.jnt_type[index])
-        if kind not in (_HINGE, _SLIDE):
-            raise ValueError(f'the joint of body {child_link!r} is neither a hinge nor a slide')
-        if np.any(np.abs(model.jnt_pos[index]) > 1e-9) and kind == _HINGE:
-            raise ValueError(f'the hinge of body {child_link!r} is off its body frame; URDF turns about the frame')
-        joint = ElementTree.Element('joint', name=mujoco.mj_id2name(model, _NAME.mjOBJ_JOINT, index),
-                                    type='revolute' if kind == _HINGE else 'prismatic')
+def _joints(model: mujoco.MjModel, body: int, parent_link: str, child_link: str) -> list[ElementTree.Element]:
+    """The URDF joints that connect `child_link` to `parent_link`: one for a body with no joint (fixed) or one joint;
+    for a body with several (a mobile base's x, y and yaw), a chain through a massless link per joint, each joint
+    placed where MuJoCo puts it (a hinge's `pos` off the body frame included) and the body fixed after the last."""
     if body == model.body_rootid[body] or model.body_parentid[body] == 0:  # the root: where the model puts it
         data = mujoco.MjData(model)
         mujoco.mj_kinematics(model, data)
-        _origin(joint, data.xpos[body], data.xquat[body])
+        position, quaternion = data.xpos[body], data.xquat[body]
     else:
-        _origin(joint, model.body_pos[body], model.body_quat[body])
-    ElementTree.SubElement(joint, 'parent', link=parent_link)
-    ElementTree.SubElement(joint, 'child', link=child_link)
-    if count:
-        index = model.body_jntadr[body]
+        position, quaternion = model.body_pos[body], model.body_quat[body]
+    count = int(model.body_jntnum[body])
+    if count == 0:
+        joint = ElementTree.Element('joint', name=f'{parent_link}_to_{child_link}', type='fixed')
+        _origin(joint, position, quaternion)
+        ElementTree.SubElement(joint, 'parent', link=parent_link)
+        ElementTree.SubElement(joint, 'child', link=child_link)
+        return [joint]
+    elements, parent, offset = [], parent_link, np.zeros(3)  # offset: the previous joint's pos in the body frame
+    for number in range(count):
+        index = model.body_jntadr[body] + number
+        kind = int(model.jnt_type[index])
+        name = mujoco.mj_id2name(model, _NAME.mjOBJ_JOINT, index)
+        if kind not in (_HINGE, _SLIDE):
+            raise ValueError(f'the joint {name!r} of body {child_link!r} is neither a hinge nor a slide')
+        last = number == count - 1
+        link = child_link if last and not np.any(np.abs(model.jnt_pos[index]) > 1e-9) else f'{child_link}_{name}'
+        joint = ElementTree.Element('joint', name=name, type='revolute' if kind == _HINGE else 'prismatic')
+        pos = np.asarray(model.jnt_pos[index], dtype=float)
+        if number == 0:  # the body's pose, then the joint's place in the body frame
+            rotation = np.zeros(9)
+            mujoco.mju_quat2Mat(rotation, np.asarray(quaternion, dtype=float))
+            _origin(joint, np.asarray(position) + rotation.reshape(3, 3) @ pos, quaternion)
+        else:  # the frames of one body's joints share its orientation
+            _origin(joint, pos - offset, (1.0, 0.0, 0.0, 0.0))
+        offset = pos
+        ElementTree.SubElement(joint, 'parent', link=parent)
+        ElementTree.SubElement(joint, 'child', link=link)
         ElementTree.SubElement(joint, 'axis', xyz=_numbers(model.jnt_axis[index]))
-        low, high = model.jnt_range[index] if model.jnt_limited[index] else (-2 * math.pi, 2 * math.pi)
+        if kind == _SLIDE and not model.jnt_limited[index]:
+            low, high = -100.0, 100.0  # URDF wants limits; an unlimited slide (a mobile base) gets a room's worth
+        else:
+            low, high = model.jnt_range[index] if model.jnt_limited[index] else (-2 * math.pi, 2 * math.pi)
         actuator_force = [model.actuator_forcerange[a][1] for a in range(model.nu)
-                          if model.actuator_trnid[a][0] == index and model.actuator_forcelimited[a]]
+                          if model.actuator_trntype[a] == _JOINT_TRANSMISSION and model.actuator_trnid[a][0] == index
+                          and model.actuator_forcelimited[a]]
         ElementTree.SubElement(joint, 'limit', lower=f'{low:.6g}', upper=f'{high:.6g}',
                                effort=f'{(actuator_force or [100.0])[0]:.6g}', velocity=f'{math.pi:.6g}')
-    return joint
+        elements.append(joint)
+        if link != child_link:
+            elements.append(ElementTree.Element('link', name=link))
+            if last:  # the body itself, back from the last joint's place to the body frame
+                fixed = ElementTree.Element('joint', name=f'{link}_to_{child_link}', type='fixed')
+                _origin(fixed, -pos, (1.0, 0.0, 0.0, 0.0))
+                ElementTree.SubElement(fixed, 'parent', link=link)
+                ElementTree.SubElement(fixed, 'child', link=child_link)
+                elements.append(fixed)
+        parent = link
+    return elements
 
 
 def robot_urdf(model: mujoco.MjModel, root_body: str = ROOT_BODY, robot_name: str = 'ur5e_gripper') -> str:
@@ -155,7 +182,7 @@ def robot_urdf(model: mujoco.MjModel, root_body: str = ROOT_BODY, robot_name: st
         name = mujoco.mj_id2name(model, _NAME.mjOBJ_BODY, body) or f'body{body}'
         names[body] = name
         robot.append(_link(model, body, name))
-        robot.append(_joint(model, body, WORLD_LINK if body == root else names[parent], name))
+        robot.extend(_joints(model, body, WORLD_LINK if body == root else names[parent], name))
     ElementTree.indent(robot)
     return '<?xml version="1.0"?>\n' + ElementTree.tostring(robot, encoding='unicode') + '\n'
 

@@ -21,6 +21,7 @@ moment the trajectory is commanded. The same seed and object list always give th
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 from typing import Sequence
 
@@ -69,6 +70,8 @@ class ObjectState:
     orientation_xyzw: tuple[float, float, float, float]
     bbox_min: tuple[float, float, float]
     bbox_max: tuple[float, float, float]
+    # Seen by the scene's visibility camera (a ray test), or True in a scene without one.
+    visible: bool = True
 
 
 @dataclasses.dataclass(frozen=True)
@@ -155,9 +158,11 @@ class TabletopWorld:
             self._place_robot_at_home()
             if self._ink is not None:
                 self._ink.reset()
-            for spec, (x, y) in zip(specs, positions):
+            for spec, position in zip(specs, positions):
+                x, y = position[:2]
+                surface = position[2] if len(position) > 2 else self.scene.surface_z
                 adr = self._object_qpos_adr[spec.name]
-                z = self.scene.surface_z + scene.resting_height(spec.category) + scene.SPAWN_CLEARANCE
+                z = surface + scene.resting_height(spec.category) + scene.SPAWN_CLEARANCE
                 self.data.qpos[adr:adr + 7] = [x, y, z, 1.0, 0.0, 0.0, 0.0]
             if self.scene.initialize is not None:  # the scene's own seeded start (e.g. a cart-pole's lean)
                 self.scene.initialize(self.model, self.data, seed)
@@ -578,16 +583,47 @@ class TabletopWorld:
 
     # --------------------------------------------------------------------------------------------- objects
     def object_states(self) -> list[ObjectState]:
-        """Ground truth of every object, in the order of the reset's object list."""
+        """Ground truth of every object, in the order of the reset's object list (with `visible` from the scene's
+        visibility camera, if it has one)."""
         with self.lock:
-            return [self._object_state(spec) for spec in self.objects]
+            return [self._seen(self._object_state(spec)) for spec in self.objects]
 
     def object_state(self, name: str) -> ObjectState:
         with self.lock:
             for spec in self.objects:
                 if spec.name == name:
-                    return self._object_state(spec)
+                    return self._seen(self._object_state(spec))
         raise KeyError(f'no object named {name!r}; objects: {", ".join(s.name for s in self.objects)}')
+
+    def _seen(self, state: ObjectState) -> ObjectState:
+        camera = self.scene.visibility_camera
+        if camera is None:
+            return state
+        return dataclasses.replace(state, visible=self.is_visible_from(camera, state))
+
+    def is_visible_from(self, camera: str, state: ObjectState, aspect: float = 4 / 3) -> bool:
+        """Whether the camera sees the object: its centre or the middle of its top is inside the camera's field of
+        view (images `aspect` wide for 1 high) and the first thing a ray from the camera to that point hits is the
+        object. The camera's own body (its mount) is left out of the test."""
+        model, data = self.model, self.data
+        cam = data.camera(camera)
+        origin, axes = cam.xpos.copy(), cam.xmat.reshape(3, 3)
+        half_height = math.radians(float(model.camera(camera).fovy[0])) / 2
+        half_width = math.atan(math.tan(half_height) * aspect)
+        mount = int(model.cam_bodyid[model.camera(camera).id])
+        body = self._object_body_ids[state.name]
+        top = (state.position[0], state.position[1], state.bbox_max[2] - 0.005)
+        hit = np.array([-1], dtype=np.int32)
+        for point in (np.array(state.position), np.array(top)):
+            ray = point - origin
+            depth = -float(ray @ axes[:, 2])  # a MuJoCo camera looks along its -z
+            if depth <= 0 or abs(math.atan2(float(ray @ axes[:, 0]), depth)) > half_width or \
+                    abs(math.atan2(float(ray @ axes[:, 1]), depth)) > half_height:
+                continue
+            mujoco.mj_ray(model, data, origin, ray, None, 1, mount, hit)
+            if hit[0] >= 0 and model.geom_bodyid[hit[0]] == body:
+                return True
+        return False
 
     def _object_state(self, spec: ObjectSpec) -> ObjectState:
         model, data = self.model, self.data

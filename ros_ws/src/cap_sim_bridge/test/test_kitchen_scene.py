@@ -93,3 +93,25 @@ def test_the_head_camera_sees_the_room(world):
 def test_the_arm_joints_are_the_arms_and_the_base_joints_are_published_as_the_scenes(world):
     assert set(robot.BASE_JOINT_NAMES) <= set(world.scene_joint_names())
     assert not set(ARM_JOINT_NAMES) & set(world.scene_joint_names())
+
+
+def test_objects_stand_on_the_furniture_and_the_head_camera_sees_only_what_is_in_front_of_it(world):
+    from cap_kitchen import objects
+    states = world.object_states()
+    assert [s.name for s in states] == objects.default_objects(0)
+    for state in states:
+        surface = objects.surface_of(*state.position[:2])
+        assert surface in objects.SURFACES, state.name
+        assert state.bbox_min[2] == pytest.approx(layout.location(surface).top, abs=0.005), f'{state.name} rests'
+    # Turned away from everything (facing the wall behind the start), the camera sees nothing; facing each object
+    # from a metre and a half away in the open, it sees that one.
+    world.follow_base_trajectory([3.0], [[0.0, 0.0, math.pi]])
+    world.run_for(3.5)
+    assert not any(s.visible for s in world.object_states() if s.position[0] > 0.5)
+    seen_table = [s for s in states if objects.surface_of(*s.position[:2]) == 'table']
+    approach = layout.location('table').approach()
+    world.follow_base_trajectory([8.0], [list(approach[:2]) + [world.base_pose()[2] - math.pi / 2]])
+    world.run_for(8.5)
+    assert world.base_pose()[:2] == pytest.approx(approach[:2], abs=0.01)
+    now = {s.name: s.visible for s in world.object_states()}
+    assert all(now[s.name] for s in seen_table), now

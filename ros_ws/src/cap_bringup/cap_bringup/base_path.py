@@ -1,0 +1,108 @@
+"""A mobile base's recorded path: what it did (reached points, visits in turn, loops around a point) and a top-down
+map of the kitchen with the path drawn. Plain Python, NumPy and OpenCV; no ROS.
+
+A path is an (N, 2) array of the base's x, y [m] sampled while it moved (cap_bringup.mobile_demo records it from the
+simulator).
+"""
+from __future__ import annotations
+
+import math
+import pathlib
+from typing import Sequence
+
+import numpy as np
+from cap_kitchen import layout
+
+REACHED = 0.05  # [m] a point counts as reached when the base's centre came this close
+
+
+def closest_approach(path: np.ndarray, point: Sequence[float]) -> float:
+    """How close the base's centre came to `point` [m]."""
+    return float(np.linalg.norm(np.asarray(path)[:, :2] - np.asarray(point[:2], dtype=float), axis=1).min())
+
+
+def missed_points(path: np.ndarray, points: Sequence[Sequence[float]], within: float = REACHED) -> list[int]:
+    """Indices of the points the base never came within `within` of."""
+    return [i for i, point in enumerate(points) if closest_approach(path, point) > within]
+
+
+def visits(path: np.ndarray, places: dict[str, Sequence[float]], within: float = REACHED) -> list[str]:
+    """The places the base stopped by, in order: a visit begins when it comes within `within` of a place and the
+    next one counts only after it has been at another place."""
+    order: list[str] = []
+    for xy in np.asarray(path)[:, :2]:
+        for name, place in places.items():
+            if math.dist(xy, place[:2]) <= within and (not order or order[-1] != name):
+                order.append(name)
+    return order
+
+
+def winding_turns(path: np.ndarray, point: Sequence[float]) -> float:
+    """How many times the path went around `point` (signed, counterclockwise positive): its swept angle / 2 pi."""
+    offsets = np.asarray(path)[:, :2] - np.asarray(point[:2], dtype=float)
+    angles = np.unwrap(np.arctan2(offsets[:, 1], offsets[:, 0]))
+    return float((angles[-1] - angles[0]) / (2 * math.pi)) if len(angles) > 1 else 0.0
+
+
+def clearance_from(path: np.ndarray, footprint: tuple[float, float, float, float]) -> float:
+    """The least distance of the base's centre from a box footprint (x_min, y_min, x_max, y_max) [m]."""
+    x_min, y_min, x_max, y_max = footprint
+    xy = np.asarray(path)[:, :2]
+    dx = np.maximum(0.0, np.maximum(x_min - xy[:, 0], xy[:, 0] - x_max))
+    dy = np.maximum(0.0, np.maximum(y_min - xy[:, 1], xy[:, 1] - y_max))
+    return float(np.hypot(dx, dy).min())
+
+
+# ------------------------------------------------------------------------------------------- the map
+PIXELS_PER_METRE = 100
+_MARGIN = 20  # [px] around the room
+_COLOURS = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75),
+            (227, 119, 194), (127, 127, 127)]  # RGB, one per command
+
+
+def _pixel(x: float, y: float) -> tuple[int, int]:
+    """The map's pixel of a floor point (+y up in the picture)."""
+    column = _MARGIN + (x - layout.ROOM_X_RANGE[0]) * PIXELS_PER_METRE
+    row = _MARGIN + (layout.ROOM_Y_RANGE[1] - y) * PIXELS_PER_METRE
+    return int(round(column)), int(round(row))
+
+
+def draw_map(paths: Sequence[tuple[str, np.ndarray]], out: pathlib.Path) -> pathlib.Path:
+    """A top-down PNG of the kitchen: walls, furniture with names, and each (label, path) in a colour of its own,
+    numbered where it starts; the robot's last position as a circle of the base's size."""
+    import cv2
+
+    width = int((layout.ROOM_X_RANGE[1] - layout.ROOM_X_RANGE[0]) * PIXELS_PER_METRE) + 2 * _MARGIN
+    height = int((layout.ROOM_Y_RANGE[1] - layout.ROOM_Y_RANGE[0]) * PIXELS_PER_METRE) + 2 * _MARGIN + \
+        22 * len(paths)
+    image = np.full((height, width, 3), 255, dtype=np.uint8)
+    cv2.rectangle(image, _pixel(layout.ROOM_X_RANGE[0], layout.ROOM_Y_RANGE[1]),
+                  _pixel(layout.ROOM_X_RANGE[1], layout.ROOM_Y_RANGE[0]), (60, 60, 60), 3)
+    for piece in layout.FURNITURE:
+        x_min, y_min, x_max, y_max = piece.footprint
+        cv2.rectangle(image, _pixel(x_min, y_max), _pixel(x_max, y_min), (200, 200, 200), -1)
+        cv2.rectangle(image, _pixel(x_min, y_max), _pixel(x_max, y_min), (120, 120, 120), 1)
+        column, row = _pixel(x_min, (y_min + y_max) / 2)
+        cv2.putText(image, piece.name, (column + 2, row + 4), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (40, 40, 40), 1,
+                    cv2.LINE_AA)
+    legend_top = height - 22 * len(paths)
+    for index, (label, path) in enumerate(paths):
+        colour = _COLOURS[index % len(_COLOURS)]
+        points = np.array([_pixel(x, y) for x, y in np.asarray(path)[:, :2]], dtype=np.int32)
+        if len(points) > 1:
+            cv2.polylines(image, [points], False, colour, 2, cv2.LINE_AA)
+        if len(points):
+            cv2.circle(image, tuple(int(v) for v in points[0]), 5, colour, -1)
+            cv2.putText(image, str(index + 1), (int(points[0][0]) + 6, int(points[0][1]) - 6),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.5, colour, 1, cv2.LINE_AA)
+        cv2.putText(image, f'{index + 1}. {label}', (_MARGIN, legend_top + 16 + 22 * index),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.5, colour, 1, cv2.LINE_AA)
+    last = next((np.asarray(path)[-1] for _, path in reversed(paths) if len(path)), None)
+    if last is not None:
+        cv2.circle(image, _pixel(*last[:2]), int(layout.BASE_RADIUS * PIXELS_PER_METRE), (0, 0, 0), 2, cv2.LINE_AA)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(out), image[..., ::-1])
+    return out
+
+
+__all__ = ['REACHED', 'clearance_from', 'closest_approach', 'draw_map', 'missed_points', 'visits', 'winding_turns']

@@ -1,0 +1,250 @@
+"""The mobile demo: the paper's navigation commands for the mobile robot in the kitchen, through the whole graph.
+
+    cap demo mobile [--out DIR] [--backend cassette|http|local] [--cassette FILE] [--no-video]
+
+By default every answer comes from the mobile domain's cassette of hand-written reference programs (no network, no
+model). Each command's code, words and outcome are printed and checked on the base's path, recorded from the
+simulator while it runs: the corners of a rectangle reached, the same rectangle turned, a loop around the chairs,
+visits to two places in turn, a distance said; a count of snacks is checked on the simulator's objects. DIR gets
+map.png (the kitchen from above with each command's path), a video of the run from the camera that follows the
+robot (demo.mp4) and summary.json. Exit code 0 when every
+command did what it should; 130 on Ctrl-C (the graph is closed first).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import pathlib
+import re
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from cap_kitchen import layout, objects as kitchen_objects, robot
+
+from cap_bringup import base_path
+from cap_bringup.demo import VideoRecorder, _call, _wait
+from cap_lmp.local_server import MODEL_READY_TIMEOUT_S
+from cap_lmp.safe_text import terminal_text
+
+Path = np.ndarray  # (N, 2) the base's x, y while a command ran
+Objects = list  # the simulator's object states when the command ended
+Check = Callable[[Path, list[str], Objects], str]  # (path, words said, objects) -> problem ('' when fine)
+
+CHAIR = np.array(layout.location('office chair').centre)
+RECTANGLE = CHAIR + np.array([[-1.5, -1.0], [1.5, -1.0], [1.5, 1.0], [-1.5, 1.0]])
+_TURN = np.radians(-45)
+TURNED_RECTANGLE = CHAIR + (RECTANGLE - CHAIR) @ np.array([[math.cos(_TURN), -math.sin(_TURN)],
+                                                           [math.sin(_TURN), math.cos(_TURN)]]).T
+
+
+def _reached(points: np.ndarray, what: str) -> Check:
+    def check(path: Path, said: list[str], objects: Objects) -> str:
+        missed = base_path.missed_points(path, points)
+        return f'{what}: corner(s) {missed} not reached' if missed else ''
+    return check
+
+
+def _around(names: tuple[str, ...]) -> Check:
+    def check(path: Path, said: list[str], objects: Objects) -> str:
+        turns = {name: base_path.winding_turns(path, layout.location(name).centre) for name in names}
+        short = [f'{name} ({value:+.2f} turns)' for name, value in turns.items() if abs(value) < 0.9]
+        return f'not once around {", ".join(short)}' if short else ''
+    return check
+
+
+def _back_and_forth(first: str, second: str, times: int) -> Check:
+    def check(path: Path, said: list[str], objects: Objects) -> str:
+        places = {name: layout.location(name).approach() for name in (first, second)}
+        order = base_path.visits(path, places)
+        expected = [first, second] * times
+        return '' if order[-len(expected):] == expected else f'visited {order}, not {expected}'
+    return check
+
+
+def _said_distance_to(name: str) -> Check:
+    def check(path: Path, said: list[str], objects: Objects) -> str:
+        truth = math.dist(path[-1], layout.location(name).centre)
+        numbers = [float(n) for text in said for n in re.findall(r'\d+\.\d+|\d+', text)]
+        if not any(abs(n - truth) <= 0.1 for n in numbers):
+            return f'said {said}, but the {name} is {truth:.1f} m away'
+        return ''
+    return check
+
+
+def _counted_on(group: str, surface: str) -> Check:
+    def check(path: Path, said: list[str], objects: Objects) -> str:
+        truth = sum(1 for state in objects if kitchen_objects.GROUPS.get(state.name) == group
+                    and kitchen_objects.surface_of(*state.position[:2]) == surface)
+        numbers = [int(n) for text in said for n in re.findall(r'\b\d+\b', text)]
+        return '' if numbers[-1:] == [truth] else f'said {said}, but there are {truth} {group}s on the {surface}'
+    return check
+
+
+def _keeps_off(name: str) -> Check:
+    def check(path: Path, said: list[str], objects: Objects) -> str:
+        gap = base_path.clearance_from(path, layout.location(name).footprint)
+        return f'the base came within {gap:.2f} m of the {name}' if gap < layout.BASE_RADIUS else ''
+    return check
+
+
+@dataclass(frozen=True)
+class Step:
+    command: str
+    checks: tuple[Check, ...]
+
+
+STEPS = (
+    Step('move in a 3m by 2m rectangle around the office chair',
+         (_reached(RECTANGLE, 'rectangle'), _keeps_off('office chair'))),
+    Step('do that again but rotated 45 degrees clockwise',
+         (_reached(TURNED_RECTANGLE, 'turned rectangle'), _keeps_off('office chair'))),
+    Step('follow the convex hull containing the chairs', (_around(('office chair', 'chair')),)),
+    Step('move back and forth between the table and the countertop 3 times',
+         (_back_and_forth('table', 'countertop', 3),)),
+    Step('how far are you from the desk', (_said_distance_to('desk'),)),
+    Step('how many snacks are on the table?', (_counted_on(kitchen_objects.GROUP_SNACK, 'table'),)),
+)
+
+
+class PathRecorder:
+    """The base's x, y every `period` of simulated time, read from the simulator in a thread of its own."""
+
+    def __init__(self, world, period: float = 0.05) -> None:
+        self.world, self.period = world, period
+        self.points: list[np.ndarray] = []
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name='demo_path', daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        next_time = self.world.time
+        while not self._stop.is_set():
+            if self.world.time < next_time:
+                time.sleep(0.002)
+                continue
+            with self._lock:
+                self.points.append(self.world.base_pose()[:2].copy())
+            next_time += self.period
+
+    def take(self) -> Path:
+        """The points since the last take (at least the base's position now)."""
+        with self._lock:
+            points, self.points = self.points, []
+        return np.array(points + [self.world.base_pose()[:2].copy()])
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(10)
+
+
+def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '', steps=STEPS,
+             video: bool = True, log=print) -> dict:
+    """Run the commands; return the summary (also written to out_dir/summary.json)."""
+    import rclpy
+    from cap_ros_common.actions import ActionClient
+    from rclpy.context import Context
+    from std_msgs.msg import String
+
+    from cap_interfaces.action import ExecuteCommand
+    from cap_interfaces.msg import GraphNames
+
+    from cap_bringup.graph import Graph, GraphOptions
+    from cap_lmp_ros.lmp_node import outcome_name
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    context = Context()
+    rclpy.init(context=context)
+    graph = Graph(context, GraphOptions(domain='mobile', llm_backend=backend, cassette=cassette, camera_rate=0.0))
+    user = rclpy.create_node('mobile_demo', context=context)
+    graph.executor.add_node(user)
+    said: list[str] = []
+    user.create_subscription(String, GraphNames.SAY_TOPIC, lambda m: said.append(m.data), 50)
+    execute = ActionClient(user, ExecuteCommand, GraphNames.EXECUTE_ACTION)
+    summary: dict = {'output': str(out_dir), 'steps': []}
+    recorder = video_recorder = None
+    paths: list[tuple[str, Path]] = []
+    started = time.monotonic()
+    try:
+        _wait(execute.server_is_ready, 30, 'the graph to come up')
+        if backend == 'local':
+            log('waiting for the local model to load and read its prompts ...')
+            _wait(graph.nodes['lmp_node'].model_ready.is_set, MODEL_READY_TIMEOUT_S, 'the local model')
+        recorder = PathRecorder(graph.world)
+        if video:
+            video_recorder = VideoRecorder(graph.world, out_dir / 'demo.mp4', period=0.4, camera=robot.FOLLOW_CAMERA)
+        for index, step in enumerate(steps, start=1):
+            log(f'\n[{index}/{len(steps)}] > {terminal_text(step.command)}')
+            said.clear()
+            recorder.take()
+            sim_started, wall_started = graph.world.time, time.monotonic()
+            goal = _call(execute.send_goal_async(ExecuteCommand.Goal(command=step.command)), 30,
+                         'lmp_node to accept the command')
+            result = _call(goal.get_result_async(), 900, 'the command to finish').result
+            # The last words arrive on the say topic just after the result: wait for them briefly.
+            time.sleep(0.2)
+            path = recorder.take()
+            paths.append((step.command, path))
+            outcome = outcome_name(result.outcome)
+            problems = [] if outcome == 'done' else [f'ended {outcome}: {result.message}']
+            objects = graph.world.object_states()
+            problems += [p for p in (check(path, list(said), objects) for check in step.checks) if p]
+            log('code:\n' + '\n'.join('    ' + line for line in terminal_text(result.code).splitlines()))
+            for text in said:
+                log(f'robot says: {terminal_text(text)}')
+            travelled = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))) if len(path) > 1 else 0.0
+            log(f'outcome: {outcome}; drove {travelled:.1f} m in {graph.world.time - sim_started:.1f} s simulated, '
+                f'{time.monotonic() - wall_started:.1f} s wall')
+            log('as asked: ' + ('yes' if not problems else 'NO: ' + terminal_text('; '.join(problems))))
+            summary['steps'].append({'command': step.command, 'outcome': outcome, 'as_expected': not problems,
+                                     'problems': problems, 'code': result.code, 'said': list(said),
+                                     'travelled_m': travelled, 'sim_seconds': graph.world.time - sim_started,
+                                     'wall_seconds': time.monotonic() - wall_started})
+    finally:
+        if video_recorder is not None:
+            video_recorder.close()
+            summary['video'] = str(out_dir / 'demo.mp4')
+            summary['video_frames'] = video_recorder.frames
+        if recorder is not None:
+            recorder.close()
+        if paths:
+            summary['map'] = str(base_path.draw_map(paths, out_dir / 'map.png'))
+        graph.close()
+        user.destroy_node()
+        context.try_shutdown()
+    summary['all_as_expected'] = all(s['as_expected'] for s in summary['steps']) and \
+        len(summary['steps']) == len(steps)
+    summary['wall_seconds'] = time.monotonic() - started
+    (out_dir / 'summary.json').write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog='cap demo mobile', description=__doc__.split('\n\n')[0])
+    parser.add_argument('--out', type=pathlib.Path,
+                        default=pathlib.Path('output') / time.strftime('mobile-%Y%m%d-%H%M%S'))
+    parser.add_argument('--backend', choices=('cassette', 'http', 'local'), default='cassette',
+                        help='cassette (the reference programs, default), http (CAP_LLM_BASE_URL) or local')
+    parser.add_argument('--cassette', default='', help='cassette to replay (default: the mobile reference one)')
+    parser.add_argument('--no-video', action='store_true')
+    args = parser.parse_args(argv)
+    try:
+        summary = run_demo(args.out, args.backend, args.cassette, video=not args.no_video)
+    except KeyboardInterrupt:
+        print('interrupted (SIGINT)', file=sys.stderr)
+        return 130
+    good = sum(s['as_expected'] for s in summary['steps'])
+    print(f'\n{good}/{len(STEPS)} commands did what was asked in {summary["wall_seconds"]:.0f} s.')
+    print(f'The map, the video and summary.json are in {summary["output"]}')
+    return 0 if summary['all_as_expected'] else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,134 @@
+"""The mobile domain through the real graph: commands in language drive the simulated base around the kitchen.
+
+The graph is `cap up --domain mobile`'s (cap_bringup.graph): the MuJoCo bridge with the kitchen scene, the
+navigation node, and lmp_node replaying the packaged reference programs (the paper's navigation commands) and one
+written here. Where the base went is read from the simulator while the commands run.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from cap_kitchen import layout, objects
+from rclpy.action import ActionClient
+from std_msgs.msg import String
+
+from cap_bringup.graph import Graph, GraphOptions
+from cap_interfaces.action import ExecuteCommand
+from cap_interfaces.msg import GraphNames
+from cap_lmp.cassette import ANY_CONTEXT, Cassette, CassetteEntry
+from cap_lmp_ros.domains.registry import get_domain
+
+
+def _wait(predicate, timeout: float = 60.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.01)
+    return bool(predicate())
+
+
+def _call(future, timeout: float = 60.0):
+    assert _wait(future.done, timeout), 'no answer in time'
+    return future.result()
+
+
+@pytest.fixture
+def mobile(ros_context, tmp_path):
+    """The mobile graph on the packaged cassette plus a command that sends the base into the table."""
+    packaged = Cassette.load(get_domain('mobile').cassette)
+    entries = packaged.entries() + [CassetteEntry(
+        lmp='mobile_ui', query='drive onto the table', context=ANY_CONTEXT, completion="goto_pos(get_loc_pos('table'))",
+        source='written by hand for the mobile graph test')]
+    cassette = Cassette(tmp_path / 'mobile.yaml', entries)
+    cassette.save()
+    graph = Graph(ros_context, GraphOptions(domain='mobile', cassette=str(cassette.path), camera_rate=0.0))
+    user = rclpy.create_node('mobile_user', context=ros_context)
+    graph.executor.add_node(user)
+    try:
+        yield graph, user
+    finally:
+        user.destroy_node()
+        graph.close()
+
+
+def _execute(user, command: str):
+    client = getattr(user, '_execute_client', None) or ActionClient(user, ExecuteCommand, GraphNames.EXECUTE_ACTION)
+    user._execute_client = client
+    assert _wait(client.server_is_ready)
+    handle = _call(client.send_goal_async(ExecuteCommand.Goal(command=command)))
+    return _call(handle.get_result_async(), 300).result
+
+
+class PathRecorder:
+    """The base's (x, y) every 20 ms of wall time while a command runs."""
+
+    def __init__(self, world):
+        self.world, self.points, self._stop = world, [], threading.Event()
+        self._thread = threading.Thread(target=self._record, daemon=True)
+
+    def _record(self):
+        while not self._stop.is_set():
+            self.points.append(self.world.base_pose()[:2].copy())
+            time.sleep(0.02)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *_):
+        self._stop.set()
+        self._thread.join()
+
+
+def test_commands_drive_the_base_to_a_place_and_around_a_rectangle_and_a_goal_in_furniture_is_refused(mobile):
+    graph, user = mobile
+    world = graph.world
+    result = _execute(user, 'go to the table')
+    assert result.outcome == ExecuteCommand.Result.OUTCOME_DONE, result.message
+    goal = layout.location('table').approach()
+    assert math.dist(world.base_pose()[:2], goal[:2]) < 0.05
+
+    with PathRecorder(world) as recorder:
+        result = _execute(user, 'move in a 3m by 2m rectangle around the office chair')
+    assert result.outcome == ExecuteCommand.Result.OUTCOME_DONE, result.message
+    path = np.array(recorder.points)
+    centre = np.array(layout.location('office chair').centre)
+    for corner in centre + np.array([[-1.5, -1.0], [1.5, -1.0], [1.5, 1.0], [-1.5, 1.0]]):
+        assert np.linalg.norm(path - corner, axis=1).min() < 0.05, f'the base never reached the corner {corner}'
+    # Around the chair, never through it: the whole path keeps the base's footprint off the chair's.
+    x_min, y_min, x_max, y_max = layout.location('office chair').footprint
+    gaps = np.hypot(np.maximum(0, np.maximum(x_min - path[:, 0], path[:, 0] - x_max)),
+                    np.maximum(0, np.maximum(y_min - path[:, 1], path[:, 1] - y_max)))
+    assert gaps.min() > layout.BASE_RADIUS
+
+    before = world.base_pose()
+    result = _execute(user, 'drive onto the table')
+    assert result.outcome == ExecuteCommand.Result.OUTCOME_ERROR
+    assert 'inside an obstacle' in result.message
+    assert math.dist(world.base_pose()[:2], before[:2]) < 0.005, 'the base moved for a refused goal'
+    result = _execute(user, 'how far are you from the desk')
+    assert result.outcome == ExecuteCommand.Result.OUTCOME_DONE, result.message
+
+
+def test_the_robot_counts_the_snacks_it_sees_on_the_table(mobile):
+    """Perception answers from the head camera's view (a ray test in the simulator): the robot drives to the table,
+    looks, and says how many snacks are there, as the simulator has them."""
+    graph, user = mobile
+    said = []
+    user.create_subscription(String, GraphNames.SAY_TOPIC, lambda msg: said.append(msg.data), 10)
+    world = graph.world
+    snacks_on_table = [s.name for s in world.object_states() if objects.GROUPS[s.name] == objects.GROUP_SNACK
+                       and objects.surface_of(*s.position[:2]) == 'table']
+    assert snacks_on_table, 'the seed puts a snack on the table'
+    result = _execute(user, 'how many snacks are on the table?')
+    assert result.outcome == ExecuteCommand.Result.OUTCOME_DONE, result.message
+    assert _wait(lambda: said, 10)
+    assert f' {len(snacks_on_table)} snack' in said[-1]
+    hidden = [s.name for s in world.object_states() if not s.visible]
+    assert hidden, 'from the table the camera does not see everything'
