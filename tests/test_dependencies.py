@@ -87,8 +87,11 @@ def problems(src: pathlib.Path, layers: dict[str, int]) -> list[str]:
             is_test = relative.parts[0] == 'test'
             declared = package.exec_depends | (package.test_depends if is_test else set())
             where = f'{package.name}/{relative}'
+            # A test may import a helper module of its own folder (world_plan_runner beside the physics tests).
+            beside = {sibling.stem for sibling in path.parent.glob('*.py')} if is_test else set()
             for module in sorted(imported_modules(path)):
-                if module == package.name or module in sys.stdlib_module_names or module == '__future__':
+                if module == package.name or module in sys.stdlib_module_names or module == '__future__' or \
+                        module in beside:
                     continue
                 if module in packages or module in layers:
                     if module not in declared:

@@ -132,3 +132,42 @@ def test_the_robot_counts_the_snacks_it_sees_on_the_table(mobile):
     assert f' {len(snacks_on_table)} snack' in said[-1]
     hidden = [s.name for s in world.object_states() if not s.visible]
     assert hidden, 'from the table the camera does not see everything'
+
+
+COUNTER = layout.location('countertop')
+COUNTER_SPOT = (COUNTER.centre[0] + 0.5, COUNTER.footprint[1] + 0.15)
+
+
+@pytest.fixture
+def fetch(ros_context, tmp_path):
+    """The mobile graph with a coke can on the table and a program that brings it to the countertop."""
+    program = f"pick_obj('coke can')\nplace_at_pos(np.array({list(COUNTER_SPOT)}))"
+    cassette = Cassette(tmp_path / 'fetch.yaml', [CassetteEntry(
+        lmp='mobile_ui', query='bring the coke can to the countertop', context=ANY_CONTEXT, completion=program,
+        source='written by hand for the mobile graph test')])
+    cassette.save()
+    graph = Graph(ros_context, GraphOptions(domain='mobile', cassette=str(cassette.path), camera_rate=0.0,
+                                            objects='coke can, apple, chips bag', seed=4))
+    user = rclpy.create_node('mobile_user', context=ros_context)
+    graph.executor.add_node(user)
+    try:
+        yield graph, user
+    finally:
+        user.destroy_node()
+        graph.close()
+
+
+def test_a_can_is_fetched_from_where_it_stands_and_put_down_on_the_countertop(fetch):
+    """Fetch-and-place through the real graph: the base drives within reach of the can, the arm picks it, the base
+    carries it across the kitchen, the arm sets it down; judged on the simulator's final state."""
+    graph, user = fetch
+    world = graph.world
+    others = {s.name: s.position for s in world.object_states() if s.name != 'coke can'}
+    result = _execute(user, 'bring the coke can to the countertop')
+    assert result.outcome == ExecuteCommand.Result.OUTCOME_DONE, result.message
+    world.run_for(0.5)
+    can = world.object_state('coke can')
+    assert math.dist(can.position[:2], COUNTER_SPOT) < 0.03
+    assert can.bbox_min[2] == pytest.approx(COUNTER.top, abs=0.01), 'standing on the countertop'
+    for name, position in others.items():
+        assert math.dist(world.object_state(name).position, position) < 0.01, f'the {name} was moved'

@@ -83,7 +83,7 @@ def test_the_base_drives_to_a_named_place_within_5_cm_and_0_05_rad_with_feedback
     assert feedback, 'no feedback while driving'
     distances = [f.distance_remaining for f in feedback]
     assert distances[0] > 1.0 and distances[-1] < distances[0]
-    assert all(f.current_pose.header.frame_id == 'map' for f in feedback)
+    assert all(f.current_pose.header.frame_id == 'world' for f in feedback)
     assert feedback[-1].navigation_time.sec + feedback[-1].navigation_time.nanosec > 0
 
 

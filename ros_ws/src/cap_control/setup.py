@@ -26,6 +26,7 @@ setup(
             'pick_place = cap_control.pick_place_node:main',
             'follow_path = cap_control.follow_path_node:main',
             'navigation = cap_control.navigation_node:main',
+            'mobile_pick_place = cap_control.mobile_pick_place_node:main',
             'controller_node = cap_control.controller_node:main',
         ],
     },

@@ -5,7 +5,8 @@
 By default every answer comes from the mobile domain's cassette of hand-written reference programs (no network, no
 model). Each command's code, words and outcome are printed and checked on the base's path, recorded from the
 simulator while it runs: the corners of a rectangle reached, the same rectangle turned, a loop around the chairs,
-visits to two places in turn, a distance said; a count of snacks is checked on the simulator's objects. DIR gets
+visits to two places in turn, a distance said; a count of snacks, a bottle fetched to the middle of the fruits and
+things put away in their bins are checked on the simulator's objects. DIR gets
 map.png (the kitchen from above with each command's path), a video of the run from the camera that follows the
 robot (demo.mp4) and summary.json. Exit code 0 when every
 command did what it should; 130 on Ctrl-C (the graph is closed first).
@@ -86,6 +87,35 @@ def _counted_on(group: str, surface: str) -> Check:
     return check
 
 
+def _near(name: str, where: Callable[[Objects], np.ndarray], within: float, what: str) -> Check:
+    def check(path: Path, said: list[str], objects: Objects) -> str:
+        state = next((s for s in objects if s.name == name), None)
+        if state is None:
+            return f'no {name} in the scene'
+        target = where(objects)
+        gap = math.dist(state.position[:2], target[:2])
+        return '' if gap <= within else f'the {name} is {gap:.2f} m from {what}'
+    return check
+
+
+def _in_bin(name: str, bin_name: str) -> Check:
+    def check(path: Path, said: list[str], objects: Objects) -> str:
+        state = next((s for s in objects if s.name == name), None)
+        if state is None:
+            return f'no {name} in the scene'
+        x_min, y_min, x_max, y_max = layout.location(bin_name).footprint
+        inside = x_min < state.position[0] < x_max and y_min < state.position[1] < y_max and \
+            state.position[2] < layout.location(bin_name).top
+        return '' if inside else f'the {name} is at {np.round(state.position, 2).tolist()}, not in the {bin_name}'
+    return check
+
+
+def _fruit_centre(objects: Objects) -> np.ndarray:
+    fruit = [np.array(s.position) for s in objects if kitchen_objects.GROUPS.get(s.name) == kitchen_objects.GROUP_FRUIT
+             and kitchen_objects.surface_of(*s.position[:2]) == 'table']
+    return np.mean(fruit, axis=0)
+
+
 def _keeps_off(name: str) -> Check:
     def check(path: Path, said: list[str], objects: Objects) -> str:
         gap = base_path.clearance_from(path, layout.location(name).footprint)
@@ -109,7 +139,17 @@ STEPS = (
          (_back_and_forth('table', 'countertop', 3),)),
     Step('how far are you from the desk', (_said_distance_to('desk'),)),
     Step('how many snacks are on the table?', (_counted_on(kitchen_objects.GROUP_SNACK, 'table'),)),
+    Step('take the water bottle from the desk and put it in the middle of the fruits on the table',
+         (_near('water bottle', _fruit_centre, 0.05, 'the middle of the fruits'),)),
+    Step('the coke can and the apple are on the table', ()),
+    Step('put away the coke can and the apple on their corresponding bins',
+         (_in_bin('coke can', 'recycle bin'), _in_bin('apple', 'compost bin'))),
 )
+
+# The scene: fruit, a can and a snack on the table, the water bottle on the desk, a can on the countertop, placed
+# where the arm reaches them and where "the middle of the fruits" is free [m].
+SCENE = {'coke can': (1.4, 0.85), 'apple': (1.7, 0.72), 'orange': (2.5, 0.72), 'banana': (2.1, 0.88),
+         'chips bag': (2.3, 0.75), 'water bottle': (3.0, -2.3), 'sprite can': (-1.0, 2.2)}
 
 
 class PathRecorder:
@@ -152,8 +192,11 @@ def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '
     from rclpy.context import Context
     from std_msgs.msg import String
 
+    from geometry_msgs.msg import Point
+
     from cap_interfaces.action import ExecuteCommand
-    from cap_interfaces.msg import GraphNames
+    from cap_interfaces.msg import GraphNames, ObjectSpec
+    from cap_interfaces.srv import ResetScene
 
     from cap_bringup.graph import Graph, GraphOptions
     from cap_lmp_ros.lmp_node import outcome_name
@@ -168,12 +211,18 @@ def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '
     said: list[str] = []
     user.create_subscription(String, GraphNames.SAY_TOPIC, lambda m: said.append(m.data), 50)
     execute = ActionClient(user, ExecuteCommand, GraphNames.EXECUTE_ACTION)
+    reset = user.create_client(ResetScene, GraphNames.SIM_RESET_SERVICE)
     summary: dict = {'output': str(out_dir), 'steps': []}
     recorder = video_recorder = None
     paths: list[tuple[str, Path]] = []
     started = time.monotonic()
     try:
-        _wait(execute.server_is_ready, 30, 'the graph to come up')
+        _wait(lambda: execute.server_is_ready() and reset.service_is_ready(), 30, 'the graph to come up')
+        answer = _call(reset.call_async(ResetScene.Request(seed=0, objects=[
+            ObjectSpec(name=name, use_position=True, position=Point(x=xy[0], y=xy[1])) for name, xy in SCENE.items()])),
+            30, 'the scene reset')
+        if not answer.success:
+            raise RuntimeError(f'scene reset failed: {answer.message}')
         if backend == 'local':
             log('waiting for the local model to load and read its prompts ...')
             _wait(graph.nodes['lmp_node'].model_ready.is_set, MODEL_READY_TIMEOUT_S, 'the local model')

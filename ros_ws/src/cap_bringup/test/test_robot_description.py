@@ -48,7 +48,7 @@ def _link_pose(urdf: ElementTree.Element, link: str, positions: dict[str, float]
         step[:3, 3] = [float(v) for v in origin.get('xyz').split()]
         motion = np.eye(4)
         value = positions.get(joint.get('name'), 0.0)
-        if joint.get('type') == 'revolute':
+        if joint.get('type') in ('revolute', 'continuous'):
             motion[:3, :3] = _axis_angle(np.array([float(v) for v in joint.find('axis').get('xyz').split()]), value)
         elif joint.get('type') == 'prismatic':
             motion[:3, 3] = value * np.array([float(v) for v in joint.find('axis').get('xyz').split()])

@@ -163,6 +163,8 @@ class GoalNode(Node):
     """
 
     goal_description = 'motion'
+    unknown_error_code = 1  # the action's UNKNOWN (PickPlace's and FollowPath's; Navigate's is 9000)
+    moving_part = 'the arm'  # what a cancel or stop halts, in the result's message
 
     def __init__(self, name: str, **kwargs) -> None:
         super().__init__(name, **kwargs)
@@ -294,7 +296,8 @@ class GoalNode(Node):
         the executor's outcome (its `ending` and `halt_confirmed`); the goal ends as the outcome says."""
         if not self._busy.acquire(blocking=False):
             goal_handle.abort()
-            result.error_code, result.error_msg = 1, f'another {self.goal_description} is running'  # UNKNOWN
+            result.error_code = self.unknown_error_code
+            result.error_msg = f'another {self.goal_description} is running'
             return result
         goal_id = bytes(goal_handle.goal_id.uuid)
         interruption = Interruption()
@@ -304,13 +307,21 @@ class GoalNode(Node):
                 self._early_cancels.discard(goal_id)
                 interruption.cancel()
         try:
-            outcome = run(interruption)
+            try:
+                outcome = run(interruption)
+            except Exception as error:  # noqa: BLE001 - a goal must end with a code, and the node go on
+                self.get_logger().error(f'{self.goal_description} failed unexpectedly: {error!r}')
+                result.error_code = self.unknown_error_code
+                result.error_msg = f'{self.goal_description} failed unexpectedly: {error}'
+                goal_handle.abort()
+                return result
             if outcome.ending == Ending.SUCCEEDED:
                 goal_handle.succeed()
             elif outcome.ending == Ending.CANCELLED or (outcome.ending == Ending.STOPPED
                                                         and goal_handle.is_cancel_requested):
                 result.error_msg = interruption_message(Ending.CANCELLED, GraphNames.STOP_TOPIC,
-                                                        outcome.halt_confirmed, self._service_timeout)
+                                                        outcome.halt_confirmed, self._service_timeout,
+                                                        self.moving_part)
                 if _mark_canceling(goal_handle):
                     goal_handle.canceled()
                 else:

@@ -28,6 +28,7 @@ class NavigateErrorCode(enum.IntEnum):
 
     NONE = 0
     UNKNOWN = 9000
+    TF_ERROR = 9002
     TIMEOUT = 9003
     UNKNOWN_LOCATION = 9100
     UNREACHABLE = 9101

@@ -185,6 +185,10 @@ class NavigationExecutor:
             run.cancel_active_goal()
             return NavigateOutcome(Ending.FAILED, failure.code, failure.message, self.base.latest_pose(),
                                    trip.recoveries, path=trip.path)
+        except Exception as error:  # noqa: BLE001 - whatever went wrong, the base stops and the goal says so
+            run.cancel_active_goal()
+            return NavigateOutcome(Ending.FAILED, NavigateErrorCode.UNKNOWN, f'navigation failed: {error!r}',
+                                   self.base.latest_pose(), trip.recoveries, path=trip.path)
 
     def _reach(self, run: GoalRun, goal: tuple[float, float, float], trip: '_Trip',
                feedback: Callable[[NavigateProgress], None]) -> str:

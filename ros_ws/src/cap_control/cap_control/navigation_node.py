@@ -29,12 +29,14 @@ from cap_control.navigation import NavigateErrorCode
 from cap_control.navigation_executor import (
     Base, NavigateOutcome, NavigateProgress, NavigateRequest, NavigationConfig, NavigationExecutor,
 )
-from cap_control.ports import Ending, PendingGoal
+from cap_control.ports import ArmOutcome, ArmResult, Ending, PendingGoal
 from cap_interfaces.action import FollowJointTrajectory, Navigate, NavigateThroughPoses
 from cap_interfaces.msg import GraphNames, JointTolerance
 from cap_interfaces.srv import GetBasePose
 
-MAP_FRAME = 'map'
+# Poses are in the world frame (the URDF's root, as every cap-ros pose); goals may also name it "map", nav2's name.
+WORLD_FRAME = 'world'
+ACCEPTED_FRAMES = ('', 'world', 'map')
 
 
 class _BasePort(Base):
@@ -62,12 +64,27 @@ class _BasePort(Base):
                                   for t, p, v in zip(times, positions, velocities)]
         goal.path_tolerance = [JointTolerance(name=name, position=path_tolerance, velocity=-1.0, acceleration=-1.0)
                                for name in BASE_JOINT_NAMES]
-        return ActionGoal(self._node.base_client, goal, conv.arm_outcome)
+        # The end is checked against the navigation's own tolerances afterwards: the controller's goal check only
+        # has to say that the base came to rest at the end (not the arm's 2 mm).
+        goal.goal_tolerance = [JointTolerance(name=name, position=END_TOLERANCE, velocity=0.0, acceleration=0.0)
+                               for name in BASE_JOINT_NAMES]
+        return ActionGoal(self._node.base_client, goal, base_outcome)
+
+
+END_TOLERANCE = 0.02  # [m, rad] of the base controller's goal check
+
+
+def base_outcome(result: FollowJointTrajectory.Result) -> ArmOutcome:
+    """The base trajectory's result: only a path tolerance violation means the base was held back (blocked); a goal
+    tolerance miss is left to the navigation's own check of the end."""
+    if result.error_code == FollowJointTrajectory.Result.GOAL_TOLERANCE_VIOLATED:
+        return ArmOutcome(ArmResult.SUCCEEDED, result.error_string)
+    return conv.arm_outcome(result)
 
 
 def pose_msg(pose: np.ndarray, stamp) -> PoseStamped:
     msg = PoseStamped()
-    msg.header.frame_id, msg.header.stamp = MAP_FRAME, stamp
+    msg.header.frame_id, msg.header.stamp = WORLD_FRAME, stamp
     msg.pose.position.x, msg.pose.position.y = float(pose[0]), float(pose[1])
     msg.pose.orientation.z, msg.pose.orientation.w = math.sin(pose[2] / 2), math.cos(pose[2] / 2)
     return msg
@@ -80,6 +97,8 @@ def yaw_of(msg: PoseStamped) -> float:
 
 class NavigationNode(GoalNode):
     goal_description = 'navigation'
+    unknown_error_code = int(NavigateErrorCode.UNKNOWN)
+    moving_part = 'the base'
 
     def __init__(self, **kwargs) -> None:
         super().__init__('navigation', **kwargs)
@@ -120,6 +139,8 @@ class NavigationNode(GoalNode):
         result = Navigate.Result()
 
         def run(interruption):
+            if not goal.location_name.strip() and goal.pose.header.frame_id not in ACCEPTED_FRAMES:
+                return self._refuse_frame(result, goal.pose.header.frame_id)
             position = goal.pose.pose.position
             request = NavigateRequest(goal.location_name, (position.x, position.y, yaw_of(goal.pose)))
             outcome = self.navigation.run(request, interruption,
@@ -139,12 +160,22 @@ class NavigationNode(GoalNode):
                 outcome = NavigateOutcome(Ending.FAILED, NavigateErrorCode.UNREACHABLE, 'the goal has no poses')
                 result.error_code, result.error_msg = int(outcome.code), outcome.message
                 return outcome
+            frames = {p.header.frame_id for p in goal.poses} - set(ACCEPTED_FRAMES)
+            if frames:
+                return self._refuse_frame(result, sorted(frames)[0])
             outcome = self.navigation.run(NavigateRequest(poses=poses), interruption,
                                           lambda progress: self._feedback(goal_handle, progress, through=True))
             result.error_code, result.error_msg = int(outcome.code), outcome.message
             return outcome
 
         return self.serve(goal_handle, result, run)
+
+    @staticmethod
+    def _refuse_frame(result, frame: str) -> NavigateOutcome:
+        """A goal in another frame: no transforms here (the base's pose is known in the world frame only)."""
+        result.error_code = Navigate.Result.TF_ERROR
+        result.error_msg = f'goal poses must be in the world frame ("world", "map" or empty), not {frame!r}'
+        return NavigateOutcome(Ending.FAILED, NavigateErrorCode.TF_ERROR, result.error_msg)
 
     def _feedback(self, goal_handle, progress: NavigateProgress, through: bool = False) -> None:
         fields = dict(current_pose=pose_msg(progress.pose, self.get_clock().now().to_msg()),

@@ -128,7 +128,7 @@ class PickPlaceExecutor:
 
     def run(self, request: PickPlaceRequest, interruption: Interruption,
             feedback: FeedbackCallback = lambda stage, progress: None) -> PickPlaceOutcome:
-        run = _Run(self, interruption)
+        run = PlanRun(self, interruption)
         try:
             plan = run.plan(request)
             run.execute(plan, feedback)
@@ -151,8 +151,8 @@ class PickPlaceExecutor:
             return PickPlaceOutcome(Ending.FAILED, failure.code, failure.message)
 
 
-class _Run(GoalRun):
-    """One request's waits, steps and checks."""
+class PlanRun(GoalRun):
+    """One request's waits, steps and checks (the mobile pick-and-place runs its own plans with it too)."""
 
     def __init__(self, executor: PickPlaceExecutor, interruption: Interruption):
         super().__init__(interruption, WaitTimeouts(executor.timeouts.service_timeout,

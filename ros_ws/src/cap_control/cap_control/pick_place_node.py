@@ -27,7 +27,7 @@ from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 
 
-class _GripperPort(Gripper):
+class GripperPort(Gripper):
     server_description = f'the gripper action {GraphNames.SIM_GRIPPER_ACTION}'
 
     def __init__(self, node: 'PickPlaceNode'):
@@ -41,7 +41,7 @@ class _GripperPort(Gripper):
                           lambda result: GripperOutcome(float(result.position), bool(result.stalled)))
 
 
-class _PerceptionPort(Perception):
+class PerceptionPort(Perception):
     service_description = f'the perception service {GraphNames.PERCEPTION_OBJECT_STATE_SERVICE}'
 
     def __init__(self, node: 'PickPlaceNode'):
@@ -74,7 +74,7 @@ class PickPlaceNode(ArmNode):
         self._create_perception_clients(self)
         self.gripper_client = ActionClient(self, GripperCommand, GraphNames.SIM_GRIPPER_ACTION,
                                            callback_group=self.callbacks)
-        self.pick_place = PickPlaceExecutor(ArmPort(self), _GripperPort(self), _PerceptionPort(self), self.config,
+        self.pick_place = PickPlaceExecutor(ArmPort(self), GripperPort(self), PerceptionPort(self), self.config,
                                            self.timeouts, stop_source=GraphNames.STOP_TOPIC, log=self._log)
         self._server = ActionServer(self, PickPlace, GraphNames.PICK_PLACE_ACTION, self._execute,
                                     goal_callback=self._on_goal, cancel_callback=self._on_cancel,

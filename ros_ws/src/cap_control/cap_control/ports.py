@@ -142,11 +142,13 @@ class Ending(enum.Enum):
     STOPPED = 'stopped'  # by a stop request
 
 
-def interruption_message(ending: Ending, stop_source: str, halt_confirmed: bool, timeout: float) -> str:
-    """The message of a run ended by a cancel (`ending` CANCELLED) or by a stop from `stop_source`."""
+def interruption_message(ending: Ending, stop_source: str, halt_confirmed: bool, timeout: float,
+                         part: str = 'the arm') -> str:
+    """The message of a run ended by a cancel (`ending` CANCELLED) or by a stop from `stop_source`; `part` is what
+    moved ("the arm", "the base")."""
     how = 'cancelled' if ending == Ending.CANCELLED else f'stopped by {stop_source}'
     if halt_confirmed:
-        return f'{how}: the arm stopped where it was'
+        return f'{how}: {part} stopped where it was'
     return f'{how}, but the controller did not confirm the cancel of its goal within {timeout:.0f} s'
 
 

@@ -1,82 +1,23 @@
 """Pick-and-place plans carried out in the MuJoCo table-top world: blocks end up in bowls, on blocks, on corners.
 
-The executor below runs the stages the way the ROS node does (trajectories tracked by the simulated servos,
-gripper commands, checks on what the world then shows), without ROS in between, so that the plan itself is judged
-by physics: the gripper must really hold the block by friction and set it down where it belongs.
+The runner (world_plan_runner.py) runs the stages the way the ROS node does (trajectories tracked by the simulated
+servos, gripper commands, checks on what the world then shows), without ROS in between, so that the plan itself is
+judged by physics: the gripper must really hold the block by friction and set it down where it belongs.
 """
 import math
+import pathlib
+import sys
 
-import numpy as np
 import pytest
 
 from cap_control.pick_place import (
-    GripperStep, ObjectInfo, Observation, PickPlaceErrorCode, PickPlacePlan, StageName, TrajectoryStep,
-    plan_pick_place, yaw_of_quaternion,
+    ObjectInfo, Observation, PickPlaceErrorCode, StageName, TrajectoryStep, plan_pick_place,
 )
 from cap_sim_bridge.scene import ObjectSpec
-from cap_sim_bridge.world import GRIPPER_SPEED, TabletopWorld
+from cap_sim_bridge.world import TabletopWorld
 
-SETTLE = 0.3  # [s] after a trajectory's end before the next stage
-
-
-def object_info(world: TabletopWorld, name: str) -> ObjectInfo:
-    state = world.object_state(name)
-    return ObjectInfo.from_bounding_box(name, state.bbox_min, state.bbox_max, state.category,
-                                        yaw_of_quaternion(*state.orientation_xyzw))
-
-
-def run_gripper(world: TabletopWorld, step: GripperStep, observation: Observation) -> None:
-    previous_target = world.gripper_state().target_opening
-    world.command_gripper(step.position, step.max_effort)
-    # The commanded opening ramps at the finger speed; after the ramp, wait until the fingers stop (on the object
-    # or at the commanded opening).
-    world.run_for(abs(step.position - previous_target) / GRIPPER_SPEED + 0.05)
-    for _ in range(100):
-        if world.gripper_state().speed < 1e-3:
-            break
-        world.run_for(0.02)
-    state = world.gripper_state()
-    observation.gripper_position = state.opening
-    observation.gripper_stalled = state.opening > state.target_opening + 0.002
-
-
-def run_trajectory(world: TabletopWorld, plan: PickPlacePlan, step: TrajectoryStep) -> bool:
-    """Track the step; True if it stopped on contact."""
-    trajectory = plan.trajectory_for(step, world.joint_positions())
-    if len(trajectory) < 2:
-        return False
-    end = world.follow_trajectory(trajectory.times, trajectory.positions, trajectory.velocities)
-    while world.time < end + SETTLE:
-        world.step(5)
-        if step.stop_on_contact:
-            desired, _ = world.reference()
-            if np.max(np.abs(desired - world.joint_positions())) > step.contact_tolerance:
-                world.hold()
-                world.run_for(SETTLE)
-                return True
-    return False
-
-
-def execute(world: TabletopWorld, plan: PickPlacePlan) -> tuple[PickPlaceErrorCode, str, list[str]]:
-    observation = Observation()
-    stages_run = []
-    for stage in plan.stages:
-        stages_run.append(stage.name.value)
-        for step in stage.steps:
-            if isinstance(step, TrajectoryStep):
-                run_trajectory(world, plan, step)
-            else:
-                run_gripper(world, step, observation)
-        if stage.checks and not any(isinstance(step, GripperStep) for step in stage.steps):
-            observation.gripper_position = world.gripper_state().opening  # the fingers now, as /joint_states has it
-        if any(check.needs_object_position for check in stage.checks):
-            observation.object_position = world.object_state(plan.object.name).position
-        for check in stage.checks:
-            failure = check.failure(observation)
-            if failure:
-                return stage.failure_code, failure, stages_run
-    return PickPlaceErrorCode.NONE, '', stages_run
-
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))  # world_plan_runner beside this file
+from world_plan_runner import execute, object_info, run_gripper, run_trajectory  # noqa: E402
 
 @pytest.fixture
 def world():

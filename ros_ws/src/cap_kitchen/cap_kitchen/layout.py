@@ -23,6 +23,8 @@ BASE_MAX_ACCELERATION = 0.5  # [m/s^2]
 BASE_MAX_YAW_RATE = 1.2  # [rad/s]
 BASE_MAX_YAW_ACCELERATION = 2.0  # [rad/s^2]
 APPROACH_GAP = 0.12  # [m] between the base's edge and the furniture at a location's approach pose
+# Closer when the arm works on the furniture: the arm's base is then 0.24 m from the edge.
+MANIPULATION_GAP = 0.06  # [m] (more than NAVIGATION_MARGIN: the spot stays free for the base)
 NAVIGATION_MARGIN = 0.05  # [m] clearance a planned path keeps beyond the base's radius (less than APPROACH_GAP)
 
 # The side of a piece of furniture the robot approaches from (outward normal of that side, in the world frame).

@@ -41,7 +41,7 @@ KINDS: dict[str, KitchenKind] = {kind.name: kind for kind in (
     KitchenKind('coke can', 'red', 'cylinder', (0.033, 0.061, 0.0), 0.35, GROUP_DRINK),
     KitchenKind('sprite can', 'green', 'cylinder', (0.033, 0.061, 0.0), 0.35, GROUP_DRINK),
     KitchenKind('water bottle', 'cyan', 'cylinder', (0.0325, 0.105, 0.0), 0.5, GROUP_DRINK),
-    KitchenKind('chips bag', 'yellow', 'box', (0.03, 0.075, 0.1), 0.08, GROUP_SNACK),
+    KitchenKind('chips bag', 'yellow', 'box', (0.07, 0.03, 0.02), 0.06, GROUP_SNACK),
     KitchenKind('energy bar', 'brown', 'box', (0.065, 0.02, 0.012), 0.05, GROUP_SNACK),
     KitchenKind('granola bar', 'purple', 'box', (0.06, 0.018, 0.012), 0.04, GROUP_SNACK),
 )}
@@ -52,6 +52,7 @@ GROUPS: dict[str, str] = {**{name: kind.group for name, kind in KINDS.items()},
 
 SURFACES: tuple[str, ...] = ('table', 'countertop', 'desk')  # where objects stand at the start
 SPAWN_MARGIN = 0.1  # [m] inside a surface's edges
+SPAWN_DEPTH = 0.3  # [m] from the edge of a surface's approach side: within the arm's reach from there
 SPAWN_SEPARATION = 0.15  # [m] between object centres
 
 
@@ -71,6 +72,23 @@ def surface_of(x: float, y: float) -> str | None:
         if x_min <= x <= x_max and y_min <= y <= y_max:
             return piece.name
     return None
+
+
+def spawn_region(piece: layout.Furniture) -> tuple[float, float, float, float]:
+    """(x_min, y_min, x_max, y_max) where objects start on `piece`: SPAWN_MARGIN inside its edges, within SPAWN_DEPTH
+    of its approach side's edge."""
+    x_min, y_min, x_max, y_max = piece.footprint
+    x_min, y_min, x_max, y_max = x_min + SPAWN_MARGIN, y_min + SPAWN_MARGIN, x_max - SPAWN_MARGIN, y_max - SPAWN_MARGIN
+    nx, ny = layout.SIDES[piece.approach_side]
+    if nx > 0:
+        x_min = max(x_min, piece.footprint[2] - SPAWN_DEPTH)
+    elif nx < 0:
+        x_max = min(x_max, piece.footprint[0] + SPAWN_DEPTH)
+    elif ny > 0:
+        y_min = max(y_min, piece.footprint[3] - SPAWN_DEPTH)
+    else:
+        y_max = min(y_max, piece.footprint[1] + SPAWN_DEPTH)
+    return x_min, y_min, x_max, y_max
 
 
 def default_objects(seed: int) -> list[str]:
@@ -97,9 +115,9 @@ def spawn_positions(count: int, seed: int, given: Sequence[tuple[float, float] |
                 continue
             for _ in range(100):
                 piece = layout.location(str(rng.choice(list(surfaces))))
-                x_min, y_min, x_max, y_max = piece.footprint
-                x = float(rng.uniform(x_min + SPAWN_MARGIN, x_max - SPAWN_MARGIN))
-                y = float(rng.uniform(y_min + SPAWN_MARGIN, y_max - SPAWN_MARGIN))
+                x_min, y_min, x_max, y_max = spawn_region(piece)
+                x = float(rng.uniform(x_min, x_max))
+                y = float(rng.uniform(y_min, y_max))
                 if all(math.dist((x, y), other[:2]) >= SPAWN_SEPARATION for other in placed):
                     placed.append((x, y, piece.top))
                     break
@@ -112,4 +130,4 @@ def spawn_positions(count: int, seed: int, given: Sequence[tuple[float, float] |
 
 __all__ = ['FRUIT_NAMES', 'GROUPS', 'GROUP_DRINK', 'GROUP_FRUIT', 'GROUP_SNACK', 'KINDS', 'KitchenKind',
            'OBJECT_NAMES', 'SPAWN_MARGIN', 'SPAWN_SEPARATION', 'SURFACES', 'default_objects', 'spawn_positions',
-           'surface_height', 'surface_of']
+           'spawn_region', 'surface_height', 'surface_of']

@@ -12,12 +12,16 @@ import math
 from cap_kitchen.layout import BASE_RADIUS
 
 BASE_JOINT_NAMES: tuple[str, str, str] = ('base_x', 'base_y', 'base_yaw')
-BASE_HEIGHT = 0.5  # [m] top of the base, where the arm stands
+BASE_HEIGHT = 0.6  # [m] top of the base, where the arm stands (high enough to reach down onto a counter)
 BASE_CLEARANCE = 0.01  # [m] between the floor and the base's underside (it glides: planar joints)
 ARM_MOUNT: tuple[float, float, float] = (0.1, 0.0, BASE_HEIGHT)  # the UR5e's base frame in the base frame
 
 # The arm's joints while the base drives: folded over the base, inside its footprint and under the camera's view.
 STOWED_JOINTS: tuple[float, ...] = (math.pi, -2.4, 2.8, -0.5, -math.pi / 2, 0.0)
+
+# Where the tool carries a held object while the base drives (the arm's frame: x ahead, z up from the arm's base):
+# over the base, inside its footprint, the object hanging above the base's top.
+CARRY_TCP: tuple[float, float, float] = (0.15, 0.0, 0.45)
 
 # The head camera: where it is on the base and how far it looks down.
 HEAD_CAMERA = 'head'
@@ -31,6 +35,6 @@ FOLLOW_CAMERA_OFFSET: tuple[float, float, float] = (-2.2, -2.2, 2.6)  # [m] from
 FOLLOW_CAMERA_TARGET_HEIGHT = 0.6  # [m] of the point on the robot it looks at
 FOLLOW_CAMERA_FOVY = 60.0  # [deg]
 
-__all__ = ['ARM_MOUNT', 'BASE_CLEARANCE', 'BASE_HEIGHT', 'BASE_JOINT_NAMES', 'BASE_RADIUS', 'FOLLOW_CAMERA',
-           'FOLLOW_CAMERA_FOVY', 'FOLLOW_CAMERA_OFFSET', 'FOLLOW_CAMERA_TARGET_HEIGHT', 'HEAD_CAMERA',
+__all__ = ['ARM_MOUNT', 'BASE_CLEARANCE', 'BASE_HEIGHT', 'BASE_JOINT_NAMES', 'BASE_RADIUS', 'CARRY_TCP',
+           'FOLLOW_CAMERA', 'FOLLOW_CAMERA_FOVY', 'FOLLOW_CAMERA_OFFSET', 'FOLLOW_CAMERA_TARGET_HEIGHT', 'HEAD_CAMERA',
            'HEAD_CAMERA_FOVY', 'HEAD_CAMERA_PITCH', 'HEAD_CAMERA_POSITION', 'STOWED_JOINTS']

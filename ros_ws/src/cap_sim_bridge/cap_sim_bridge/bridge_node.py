@@ -344,22 +344,26 @@ class SimBridgeNode(Node):
         return tuple(watched)
 
     def _render_frames(self, now: float, watched: tuple[tuple[str, bool], ...]) -> list[tuple[Any, ...]]:
-        """(publishers, colour, depth or None, camera_info) of the `watched` cameras, rendered now."""
+        """(publishers, colour, depth or None, camera_info, pose or None) of the `watched` cameras, rendered now; the
+        pose of a camera that moves (on the mobile base) comes with each frame."""
         width, height = self._image_width, self._image_height
         frames = []
         for camera, with_depth in watched:
             publishers = self._camera_pubs[camera]
+            pose = conv.pose_stamped_msg(now, self.world.camera_pose(camera)) if self.world.camera_moves(camera) \
+                else None
             rgb, depth = self.world.render(camera, width, height, with_depth=with_depth)
             frames.append((publishers, conv.color_image_msg(now, camera, rgb),
                            conv.depth_image_msg(now, camera, depth) if depth is not None else None,
-                           conv.camera_info_msg(now, camera, self.world.camera_intrinsics(camera, width, height))))
+                           conv.camera_info_msg(now, camera, self.world.camera_intrinsics(camera, width, height)),
+                           pose))
         return frames
 
     @staticmethod
     def _send_frames(frames: list[tuple[Any, ...]], now: float) -> None:
         stamp = time_msg(now)
-        for publishers, color, depth, info in frames:
-            for kind, message in (('color', color), ('depth', depth), ('camera_info', info)):
+        for publishers, color, depth, info, pose in frames:
+            for kind, message in (('pose', pose), ('color', color), ('depth', depth), ('camera_info', info)):
                 if message is not None:
                     message.header.stamp = stamp
                     publishers[kind].publish(message)

@@ -17,7 +17,9 @@ from cap_sim_bridge.trajectory import JointTrajectory
 class MobileBase:
     joint_names = BASE_JOINT_NAMES
 
-    def __init__(self, model: mujoco.MjModel) -> None:
+    def __init__(self, model: mujoco.MjModel, command_serial: int = 0) -> None:
+        """command_serial: where the count of commands starts (a world that recompiles its model carries it over,
+        so that a follower of the old base never takes a new trajectory for its own)."""
         ids = [model.joint(name).id for name in BASE_JOINT_NAMES]
         self._qpos_adr = model.jnt_qposadr[ids]
         self._dof_adr = model.jnt_dofadr[ids]
@@ -27,7 +29,7 @@ class MobileBase:
         self._feedforward = bias[:, 2] / bias[:, 1]
         self._trajectory: JointTrajectory | None = None
         self._hold = np.zeros(len(BASE_JOINT_NAMES))
-        self.command_serial = 0  # counts trajectories and holds: a change tells a follower it was replaced
+        self.command_serial = command_serial  # counts trajectories and holds: a change tells a follower it was replaced
 
     @staticmethod
     def in_model(model: mujoco.MjModel) -> bool:

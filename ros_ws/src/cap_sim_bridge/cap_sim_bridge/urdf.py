@@ -132,7 +132,9 @@ def _joints(model: mujoco.MjModel, body: int, parent_link: str, child_link: str)
             raise ValueError(f'the joint {name!r} of body {child_link!r} is neither a hinge nor a slide')
         last = number == count - 1
         link = child_link if last and not np.any(np.abs(model.jnt_pos[index]) > 1e-9) else f'{child_link}_{name}'
-        joint = ElementTree.Element('joint', name=name, type='revolute' if kind == _HINGE else 'prismatic')
+        # An unlimited hinge (a mobile base's yaw, which counts whole turns) is a continuous joint.
+        joint_type = 'prismatic' if kind == _SLIDE else 'revolute' if model.jnt_limited[index] else 'continuous'
+        joint = ElementTree.Element('joint', name=name, type=joint_type)
         pos = np.asarray(model.jnt_pos[index], dtype=float)
         if number == 0:  # the body's pose, then the joint's place in the body frame
             rotation = np.zeros(9)

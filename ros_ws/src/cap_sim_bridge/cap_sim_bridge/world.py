@@ -209,7 +209,9 @@ class TabletopWorld:
             self._object_geom_set[ids] = True
         self._ink = InkSurface(model, self.scene.ink, self.ink_canvas) if self.ink_canvas is not None else None
         # A mobile base, in scenes that have one (the kitchen).
-        self.base: MobileBase | None = MobileBase(model) if MobileBase.in_model(model) else None
+        previous = getattr(self, 'base', None)
+        self.base: MobileBase | None = MobileBase(model, previous.command_serial + 1 if previous else 0) \
+            if MobileBase.in_model(model) else None
 
     def objects_in_model(self) -> list[str]:
         """Names of the object bodies of the current model (each has a free joint of the same name)."""
@@ -690,6 +692,12 @@ class TabletopWorld:
         """Pinhole intrinsics of images rendered at width x height from the named camera."""
         with self.lock:
             return camera_math.intrinsics_from_fovy(float(self.model.camera(camera).fovy[0]), width, height)
+
+    def camera_moves(self, camera: str) -> bool:
+        """Whether the named camera is on a moving body (the mobile base's head camera) rather than fixed."""
+        with self.lock:
+            model = self.model
+            return bool(model.body_weldid[model.cam_bodyid[model.camera(camera).id]] != 0)
 
     def camera_pose(self, camera: str) -> np.ndarray:
         """4x4 world_T_optical of the named camera (ROS optical frame: +z forward, +y down, +x right)."""

@@ -134,9 +134,10 @@ class RosRobotApi:
         return np.array([state.position.x, state.position.y])
 
     # -------------------------------------------------------------------------------------------- motion
-    def _run_goal(self, client, goal, what: str, refusal: str):
+    def _run_goal(self, client, goal, what: str, refusal: str, timeout_s: float | None = None):
         """Send `goal` to the action `client` and return its result (a stop cancels the motion, and its cancelled
-        result is awaited); RobotApiError if the server is missing, refuses the goal or does not answer."""
+        result is awaited); RobotApiError if the server is missing, refuses the goal or does not answer within
+        `timeout_s` (default: motion_timeout_s)."""
         if not client.wait_for_server(timeout_sec=self.service_timeout_s):
             name = self._client_node.resolve_topic_name(client._action_name)  # rclpy keeps it only there
             raise RobotApiError(f'{what} ({name}) is not running')
@@ -149,7 +150,7 @@ class RosRobotApi:
         try:
             if self.stop_requested.is_set():  # stopped between sending and acceptance
                 goal_handle.cancel_goal_async()
-            return self._wait(goal_handle.get_result_async(), self.motion_timeout_s, what,
+            return self._wait(goal_handle.get_result_async(), timeout_s or self.motion_timeout_s, what,
                               cancel=goal_handle.cancel_goal_async).result
         finally:
             with self._goal_lock:

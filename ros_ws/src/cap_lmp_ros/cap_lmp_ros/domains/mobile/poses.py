@@ -18,7 +18,7 @@ def floor_point(pos: Any, what: str = 'a position') -> np.ndarray:
     """np.array([x, y]) of `pos` ([x, y], or [x, y, ...] of which x and y are taken)."""
     try:
         point = np.asarray(pos, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise RobotApiError(f'{what} must be [x, y] in metres, not {type(pos).__name__}') from None
     if point.size < 2 or point.size > 3:
         raise RobotApiError(f'{what} must be [x, y] in metres, not {point.size} numbers')
@@ -31,7 +31,7 @@ def heading(angle: Any) -> float:
     """A finite angle in radians, or a RobotApiError."""
     try:
         value = float(angle)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise RobotApiError(f'an angle must be a number of radians, not {type(angle).__name__}') from None
     if not math.isfinite(value):
         raise RobotApiError('an angle must be a finite number of radians')
@@ -53,7 +53,7 @@ def traj_poses(pts: Any, start: Sequence[float]) -> list[tuple[float, float, flo
     `start`), so the base drives forward along the trajectory; points on top of the one before are dropped."""
     try:
         points = np.asarray(pts, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise RobotApiError(f'a trajectory must be rows of [x, y] in metres, not {type(pts).__name__}') from None
     if points.ndim != 2 or points.shape[1] not in (2, 3) or len(points) == 0:
         raise RobotApiError(f'a trajectory must be rows of [x, y] in metres, not an array of shape '

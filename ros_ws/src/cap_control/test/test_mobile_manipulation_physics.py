@@ -1,0 +1,99 @@
+"""Mobile pick-and-place plans carried out in the MuJoCo kitchen: the base drives within reach (planner, follower
+and timed trajectory, as the navigation node makes them), then the arm's stages run the way the ROS node runs them
+(the table top's physics runner, test_pick_place_physics.execute), so the plans are judged by physics: the gripper
+must hold each kind of object by friction while the base drives, and set it down where it belongs."""
+import math
+import pathlib
+import sys
+
+import pytest
+from cap_kitchen import layout, objects, robot
+
+from cap_control.mobile_manipulation import (
+    MobileErrorCode, object_in_arm_frame, plan_pick, plan_place, reach_pose, to_arm,
+)
+from cap_control.navigation import PathFollower, base_trajectory, follow_on_ideal_base, plan_path, wrap_angle
+from cap_control.navigation_executor import NavigationConfig
+from cap_control.pick_place import PickPlaceErrorCode, PickPlaceError
+from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge.world import TabletopWorld
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))  # world_plan_runner beside this file
+from world_plan_runner import execute, object_info  # noqa: E402
+
+CONFIG = NavigationConfig()
+GRID = CONFIG.grid()
+
+
+def drive(world: TabletopWorld, goal) -> None:
+    """The base to `goal` as the navigation node drives it (no obstacles the map lacks here)."""
+    pose = world.base_pose()
+    path = plan_path(GRID, pose, goal)
+    poses, commands = follow_on_ideal_base(PathFollower(path, goal[2], CONFIG.limits()),
+                                           (pose[0], pose[1], wrap_angle(pose[2])), 0.01)
+    times, positions, velocities = base_trajectory(poses, commands, 0.01, float(pose[2]))
+    end = world.follow_base_trajectory(times[1:], positions[1:], velocities[1:])
+    world.run_for(end - world.time + 0.3)
+
+
+def pick(world: TabletopWorld, name: str):
+    obj = object_info(world, name)
+    piece = layout.location(objects.surface_of(*obj.position[:2]))
+    drive(world, reach_pose(obj.position, piece, GRID))
+    obj = object_info(world, name)
+    plan, held = plan_pick(object_in_arm_frame(obj, world.base_pose()), obj, world.joint_positions())
+    code, message, _ = execute(world, plan)
+    return code, message, held
+
+
+@pytest.fixture(scope='module')
+def world():
+    return TabletopWorld('kitchen', seed=0)
+
+
+@pytest.mark.parametrize('name', objects.OBJECT_NAMES)
+def test_every_kind_of_object_is_picked_and_carried_across_the_kitchen(world, name):
+    world.reset(3, [name])
+    code, message, held = pick(world, name)
+    assert code == PickPlaceErrorCode.NONE, message
+    drive(world, layout.location('office chair').approach())
+    state = world.object_state(name)
+    assert state.position[2] > robot.BASE_HEIGHT + 0.05, f'the {name} is not held over the base'
+    assert math.dist(state.position[:2], world.base_pose()[:2]) < layout.BASE_RADIUS + 0.03
+
+
+def test_a_can_fetched_from_the_table_is_put_down_on_the_countertop_and_another_dropped_in_a_bin(world):
+    table = layout.location('table')
+    world.reset(0, [ObjectSpec.from_name('coke can', (table.centre[0], table.footprint[1] + 0.15)),
+                    ObjectSpec.from_name('apple', (table.centre[0] + 0.3, table.footprint[1] + 0.2))])
+    code, message, held = pick(world, 'coke can')
+    assert code == PickPlaceErrorCode.NONE, message
+    counter = layout.location('countertop')
+    spot = (counter.centre[0] + 0.5, counter.footprint[1] + 0.15, counter.top)
+    drive(world, reach_pose(spot, counter, GRID))
+    plan = plan_place(held, to_arm(spot, world.base_pose()), spot, world.joint_positions())
+    code, message, _ = execute(world, plan)
+    assert code == PickPlaceErrorCode.NONE, message
+    world.run_for(0.5)
+    can = world.object_state('coke can')
+    assert math.dist(can.position[:2], spot[:2]) < 0.03
+    assert can.bbox_min[2] == pytest.approx(counter.top, abs=0.01), 'standing on the counter'
+
+    code, message, held = pick(world, 'apple')
+    assert code == PickPlaceErrorCode.NONE, message
+    bin_ = layout.location('compost bin')
+    drive(world, reach_pose(bin_.centre, bin_, GRID))
+    plan = plan_place(held, to_arm((*bin_.centre, 0.01), world.base_pose()), (*bin_.centre, 0.01),
+                      world.joint_positions(), drop_from=bin_.top - robot.ARM_MOUNT[2])
+    code, message, _ = execute(world, plan)
+    assert code == PickPlaceErrorCode.NONE, message
+    world.run_for(1.0)
+    apple = world.object_state('apple')
+    x_min, y_min, x_max, y_max = bin_.footprint
+    assert x_min < apple.position[0] < x_max and y_min < apple.position[1] < y_max and apple.position[2] < 0.2
+
+
+def test_a_spot_out_of_reach_from_every_side_is_refused():
+    counter = layout.location('countertop')
+    with pytest.raises(PickPlaceError) as error:
+        reach_pose((counter.centre[0], counter.footprint[3] - 0.02), counter, GRID, reach=0.3)
+    assert error.value.code == MobileErrorCode.OUTSIDE_WORKSPACE
