@@ -38,16 +38,10 @@ def _call(future, timeout: float = 60.0):
     return future.result()
 
 
-@pytest.fixture
-def mobile(ros_context, tmp_path):
-    """The mobile graph on the packaged cassette plus a command that sends the base into the table."""
-    packaged = Cassette.load(get_domain('mobile').cassette)
-    entries = packaged.entries() + [CassetteEntry(
-        lmp='mobile_ui', query='drive onto the table', context=ANY_CONTEXT, completion="goto_pos(get_loc_pos('table'))",
-        source='written by hand for the mobile graph test')]
-    cassette = Cassette(tmp_path / 'mobile.yaml', entries)
+def _graph_with(ros_context, cassette: Cassette, **options):
+    """The mobile graph replaying `cassette`, and a user node on its executor; closed after the test."""
     cassette.save()
-    graph = Graph(ros_context, GraphOptions(domain='mobile', cassette=str(cassette.path), camera_rate=0.0))
+    graph = Graph(ros_context, GraphOptions(domain='mobile', cassette=str(cassette.path), camera_rate=0.0, **options))
     user = rclpy.create_node('mobile_user', context=ros_context)
     graph.executor.add_node(user)
     try:
@@ -55,6 +49,16 @@ def mobile(ros_context, tmp_path):
     finally:
         user.destroy_node()
         graph.close()
+
+
+@pytest.fixture
+def mobile(ros_context, tmp_path):
+    """The mobile graph on the packaged cassette plus a command that sends the base into the table."""
+    packaged = Cassette.load(get_domain('mobile').cassette)
+    entries = packaged.entries() + [CassetteEntry(
+        lmp='mobile_ui', query='drive onto the table', context=ANY_CONTEXT, completion="goto_pos(get_loc_pos('table'))",
+        source='written by hand for the mobile graph test')]
+    yield from _graph_with(ros_context, Cassette(tmp_path / 'mobile.yaml', entries))
 
 
 def _execute(user, command: str):
@@ -145,16 +149,7 @@ def fetch(ros_context, tmp_path):
     cassette = Cassette(tmp_path / 'fetch.yaml', [CassetteEntry(
         lmp='mobile_ui', query='bring the coke can to the countertop', context=ANY_CONTEXT, completion=program,
         source='written by hand for the mobile graph test')])
-    cassette.save()
-    graph = Graph(ros_context, GraphOptions(domain='mobile', cassette=str(cassette.path), camera_rate=0.0,
-                                            objects='coke can, apple, chips bag', seed=4))
-    user = rclpy.create_node('mobile_user', context=ros_context)
-    graph.executor.add_node(user)
-    try:
-        yield graph, user
-    finally:
-        user.destroy_node()
-        graph.close()
+    yield from _graph_with(ros_context, cassette, objects='coke can, apple, chips bag', seed=4)
 
 
 def test_a_can_is_fetched_from_where_it_stands_and_put_down_on_the_countertop(fetch):

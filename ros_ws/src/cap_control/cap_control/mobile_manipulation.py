@@ -42,22 +42,9 @@ MAX_GRASP_DEPTH = 0.06  # [m]
 MOBILE_CONFIG = PickPlaceConfig(gripper_side_room=0.005)
 
 
-class MobileErrorCode(enum.IntEnum):
-    """The MobilePickPlace action's codes: PickPlace's, and its own from 20."""
-
-    NONE = 0
-    UNKNOWN = 1
-    OBJECT_NOT_FOUND = 2
-    TARGET_NOT_FOUND = 3
-    OUTSIDE_WORKSPACE = 4
-    IK_FAILED = 5
-    GRASP_MISSED = 6
-    OBJECT_DROPPED = 7
-    CANCELLED = 8
-    TIMEOUT = 9
-    UNREACHABLE = 20
-    HANDS_FULL = 21
-    NOTHING_HELD = 22
+# The MobilePickPlace action's codes: PickPlace's, and its own from 20.
+MobileErrorCode = enum.IntEnum('MobileErrorCode', {**{code.name: code.value for code in PickPlaceErrorCode},
+                                                   'UNREACHABLE': 20, 'HANDS_FULL': 21, 'NOTHING_HELD': 22})
 
 
 def arm_pose(base_pose: Sequence[float]) -> np.ndarray:
