@@ -27,6 +27,7 @@ setup(
         'cap_ros.benchmarks': [
             'tabletop = cap_bench.runner:main',
             'whiteboard = cap_bench.whiteboard.bench:main',
+            'mobile = cap_bench.mobile.bench:main',
             'codegen = cap_bench.codegen.bench:main',
             'humaneval = cap_bench.humaneval.bench:main',
             'reasoning = cap_bench.reasoning.bench:main',

@@ -525,7 +525,7 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
 
 
 BENCH_USAGE = """usage: cap bench NAME [options]   (options: cap bench NAME --help)
-       NAME: tabletop | devset | whiteboard | controllers | codegen | humaneval | reasoning
+       NAME: tabletop | devset | whiteboard | controllers | mobile | codegen | humaneval | reasoning
 
 The paper's simulated table-top benchmark through the cap-ros graph, e.g.
     cap bench tabletop --trials 1                   one episode of every row with the reference programs
@@ -534,6 +534,7 @@ The paper's simulated table-top benchmark through the cap-ros graph, e.g.
 The other domains through their graphs, e.g.
     cap bench whiteboard --trials 20                drawing and erasing, judged on the ink
     cap bench controllers --trials 5                generated controllers: balance, push, track
+    cap bench mobile --trials 20                    the mobile robot in the kitchen: drive, fetch, put away, count
 The paper's language-side tables through the engine and the sandbox process (no graph), e.g.
     cap bench codegen                               robot code generation, flat and hierarchical (oracle)
     cap bench humaneval --policy llm --jobs 2       HumanEval with the model at CAP_LLM_BASE_URL

@@ -30,8 +30,13 @@ from cap_control.pick_place import (
 # gripper pointing down reaches 0.8 m at 0.25 m above its base and 0.65 m at 0.5 m (measured with its kinematics).
 REACH = 0.65  # [m]
 LATERAL_MARGIN = 0.1  # [m] the base's spot stays this far inside a side's ends
+# The elbow swings out beyond the base's footprint while the arm moves between the furniture and the carry pose: a
+# base that works there keeps this far from the walls (the elbow hit the wall from 0.39 m).
+WALL_CLEARANCE = 0.55  # [m] of the base's centre
 APPROACH_CLEARANCE = 0.08  # [m] the tool above the object's top (or the spot) before it goes down
 DROP_CLEARANCE = 0.12  # [m] the held object's bottom above a bin's rim when it is let go
+TRAVEL_SAG = 0.05  # [m] a move over a spot may dip this much below its end height
+CARRY_OUT = 0.4  # [m] ahead of the arm's base, where the tool goes straight out of the carry pose before a place
 PLACE_TOLERANCE = 0.05  # [m] of an object placed at a spot from the spot
 MIN_GRASP_HEIGHT = 0.016  # [m] of the tool centre above the surface an object stands on
 # The gripper's palm is 70 mm above the tool centre (models/ur5e_gripper.xml): a grasp goes at most this far below
@@ -84,7 +89,7 @@ def reach_pose(xy: Sequence[float], piece: layout.Furniture, grid: OccupancyGrid
         # Straight across from the point, or (a wall or furniture there) slid along the side toward its middle.
         for lateral in np.linspace(across, 0.0, max(2, int(abs(across) / 0.05) + 1)):
             centre = np.array(piece.centre) + distance * np.array([nx, ny]) + lateral * lateral_axis
-            if grid.is_free(centre):
+            if grid.is_free(centre) and _clear_of_walls(centre):
                 break
         else:
             continue
@@ -97,6 +102,12 @@ def reach_pose(xy: Sequence[float], piece: layout.Furniture, grid: OccupancyGrid
                              f'({xy[0]:.2f}, {xy[1]:.2f}) on the {piece.name} is out of the arm\'s reach from every '
                              f'side the base can stand at')
     return best[1]
+
+
+def _clear_of_walls(xy: Sequence[float]) -> bool:
+    """Whether the arm, swinging out of the carry pose, keeps off the room's walls from a base at `xy`."""
+    (x0, x1), (y0, y1) = layout.ROOM_X_RANGE, layout.ROOM_Y_RANGE
+    return min(xy[0] - x0, x1 - xy[0], xy[1] - y0, y1 - xy[1]) >= WALL_CLEARANCE
 
 
 @dataclasses.dataclass(frozen=True)
@@ -172,7 +183,11 @@ def plan_place(held: Held, spot: Sequence[float], world_spot: Sequence[float], j
     else:
         release_z = rest_z + held.below_tcp + config.place_clearance
         above_z = rest_z + held.below_tcp + APPROACH_CLEARANCE
-    move = planner.joint_move((x, y, above_z), yaw, f'above {description}')
+    # Out of the carry pose in a straight line first (a joint move from there swings the upper arm through a tall
+    # held object), then over the spot; a joint move that would dip more than TRAVEL_SAG below its end height (the
+    # held object through a bin's wall or the furniture's edge) is a straight line instead.
+    out = planner.line((CARRY_OUT, 0.0, robot.CARRY_TCP[2]), yaw, 'out of the carry pose')
+    move = [out, planner.travel((x, y, above_z), yaw, f'above {description}', above_z - TRAVEL_SAG)]
     if drop_from is not None:
         place_steps = []
     else:  # down slowly until the held object touches
@@ -186,7 +201,7 @@ def plan_place(held: Held, spot: Sequence[float], world_spot: Sequence[float], j
     checks = [] if drop_from is not None else [PlacedCheck(held.name, (float(world_spot[0]), float(world_spot[1])),
                                                            PLACE_TOLERANCE)]
     stages = [
-        Stage(StageName.MOVE, [move], failure_code=PickPlaceErrorCode.IK_FAILED),
+        Stage(StageName.MOVE, move, failure_code=PickPlaceErrorCode.IK_FAILED),
         Stage(StageName.PLACE, place_steps, failure_code=PickPlaceErrorCode.IK_FAILED),
         Stage(StageName.RELEASE, [GripperStep(release_width)]),
         Stage(StageName.RETREAT, retreat, checks, PickPlaceErrorCode.OBJECT_DROPPED),

@@ -97,3 +97,20 @@ def test_a_spot_out_of_reach_from_every_side_is_refused():
     with pytest.raises(PickPlaceError) as error:
         reach_pose((counter.centre[0], counter.footprint[3] - 0.02), counter, GRID, reach=0.3)
     assert error.value.code == MobileErrorCode.OUTSIDE_WORKSPACE
+
+
+@pytest.mark.parametrize('name', ['water bottle', 'coke can', 'banana', 'chips bag'])
+def test_tall_and_long_things_dropped_into_a_bin_land_inside_it(world, name):
+    world.reset(5, [name])
+    code, message, held = pick(world, name)
+    assert code == PickPlaceErrorCode.NONE, message
+    bin_ = layout.location('recycle bin')
+    drive(world, reach_pose(bin_.centre, bin_, GRID))
+    plan = plan_place(held, to_arm((*bin_.centre, 0.01), world.base_pose()), (*bin_.centre, 0.01),
+                      world.joint_positions(), drop_from=bin_.top - robot.ARM_MOUNT[2])
+    code, message, _ = execute(world, plan)
+    assert code == PickPlaceErrorCode.NONE, message
+    world.run_for(1.5)
+    state = world.object_state(name)
+    x_min, y_min, x_max, y_max = bin_.footprint
+    assert x_min < state.position[0] < x_max and y_min < state.position[1] < y_max, state.position

@@ -1,0 +1,1 @@
+"""The mobile kitchen benchmark (`cap bench mobile`)."""

@@ -1,0 +1,168 @@
+"""The mobile benchmark's episodes: seeded instructions from templates, the objects in the kitchen, and the reference
+(oracle) program of every instruction.
+
+Templates (this project's; the paper reports no number for this domain):
+- goto: "go to the desk" (a named location; the base must end within 5 cm and 0.05 rad of its approach pose);
+- rectangle: "move in a 2.5m by 1.5m rectangle around the chair" (every corner reached within 5 cm, the base never
+  over the location's footprint);
+- back_and_forth: "move back and forth between the table and the desk 2 times" (the visits in that order);
+- fetch: "bring the coke can to the countertop" (it ends standing on that piece of furniture, within 5 cm of the
+  spot the program chose: the furniture's centre);
+- bin: "put the apple in the compost bin" (it ends inside that bin);
+- count: "how many snacks are on the table?" (the last number said is the count the simulator has).
+Every episode stands six or seven objects on the table, the countertop and the desk (cap_kitchen.objects); a
+fetch's object starts on another piece of furniture than its destination, whose centre is kept free.
+
+A reference program depends only on its instruction's words (one cassette serves every episode).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+
+import numpy as np
+from cap_kitchen import layout, objects
+
+from cap_control.navigation_executor import NavigationConfig
+
+TEMPLATES = ('goto', 'rectangle', 'back_and_forth', 'fetch', 'bin', 'count')
+GOTO_PLACES = tuple(layout.LOCATION_NAMES)
+AROUND = ('office chair', 'chair', 'barstool')  # what rectangles go around
+SIDES = (1.5, 2.0, 2.5, 3.0)  # [m] a rectangle's sides
+PLACES_KEPT_FREE = 0.2  # [m] around a fetch's destination spot, no object at the start
+BINS_FOR = {objects.GROUP_DRINK: 'recycle bin', objects.GROUP_FRUIT: 'compost bin', objects.GROUP_SNACK: 'landfill bin'}
+_GRID = NavigationConfig().grid()
+
+
+@dataclasses.dataclass(frozen=True)
+class KitchenObject:
+    name: str
+    xy: tuple[float, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class Episode:
+    template: str
+    seed: int
+    instructions: tuple[str, ...]
+    objects: tuple[KitchenObject, ...]
+    attributes: dict
+
+    @property
+    def key(self) -> str:
+        return f'{self.template}/{self.seed}'
+
+
+# ------------------------------------------------------------------------------------------- oracle programs
+def oracle_program(instruction: str) -> str:
+    """The reference program of an instruction of any template (its words say everything the program needs)."""
+    text = instruction.strip().rstrip('.?').lower()
+    if match := re.fullmatch(r'go to the (.+)', text):
+        return f'goto_loc({match[1]!r})'
+    if match := re.fullmatch(r'move in a ([\d.]+)m by ([\d.]+)m rectangle around the (.+)', text):
+        half_w, half_h = float(match[1]) / 2, float(match[2]) / 2
+        return (f'center = get_loc_pos({match[3]!r})\n'
+                f'corners = np.array([[-{half_w}, -{half_h}], [{half_w}, -{half_h}], [{half_w}, {half_h}], '
+                f'[-{half_w}, {half_h}], [-{half_w}, -{half_h}]])\n'
+                'follow_traj(center + corners)')
+    if match := re.fullmatch(r'move back and forth between the (.+) and the (.+) (\d+) times', text):
+        return f'for _ in range({int(match[3])}):\n    goto_loc({match[1]!r})\n    goto_loc({match[2]!r})'
+    if match := re.fullmatch(r'bring the (.+) to the (.+)', text):
+        return f'pick_obj({match[1]!r})\nplace_at_pos(get_loc_pos({match[2]!r}))'
+    if match := re.fullmatch(r'put the (.+) in the (.+ bin)', text):
+        return f'pick_obj({match[1]!r})\nplace_at_pos(get_loc_pos({match[2]!r}))'
+    if match := re.fullmatch(r'how many (\w+)s are on the (.+)', text):
+        group, surface = match[1], match[2]
+        members = sorted(name for name, g in objects.GROUPS.items() if g == group)
+        return (f'surface_pos = get_loc_pos({surface!r})\n'
+                f'names = [name for name in get_obj_names() if name in {members!r} and '
+                f'np.linalg.norm(get_obj_pos(name) - surface_pos) < {_radius(surface):.2f}]\n'
+                f'say(f"There are {{len(names)}} {group}s on the {surface}")')
+    raise ValueError(f'no reference program for {instruction!r}')
+
+
+def _radius(surface: str) -> float:
+    """How far from a surface's centre an object on it can be: half its footprint's diagonal."""
+    piece = layout.location(surface)
+    return math.hypot(*piece.size[:2]) / 2 + 0.01
+
+
+# ------------------------------------------------------------------------------------------- sampling
+def sample_episode(template: str, seed: int) -> Episode:
+    """The episode of `template` for `seed` (deterministic); ValueError for an unknown template."""
+    if template not in TEMPLATES:
+        raise ValueError(f'unknown template {template!r}; templates: {", ".join(TEMPLATES)}')
+    rng = np.random.default_rng([seed, TEMPLATES.index(template), 41])
+    for attempt in range(100):
+        episode = _try_episode(template, seed, rng)
+        if episode is not None:
+            return episode
+    raise ValueError(f'no {template} episode found for seed {seed}')
+
+
+def _scene(seed: int, rng: np.random.Generator, keep_free: tuple[float, float] | None = None,
+           must_have: tuple[str, ...] = ()) -> tuple[KitchenObject, ...] | None:
+    names = list(dict.fromkeys([*must_have, *objects.default_objects(int(rng.integers(1 << 30)))]))
+    placed = objects.spawn_positions(len(names), int(rng.integers(1 << 30)))
+    if keep_free is not None and any(math.dist(p[:2], keep_free) < PLACES_KEPT_FREE for p in placed):
+        return None
+    return tuple(KitchenObject(name, (round(p[0], 4), round(p[1], 4))) for name, p in zip(names, placed))
+
+
+def _try_episode(template: str, seed: int, rng: np.random.Generator) -> Episode | None:
+    attributes: dict = {}
+    if template == 'goto':
+        place = str(rng.choice(GOTO_PLACES))
+        instructions = (f'go to the {place}',)
+        attributes['place'] = place
+        scene = _scene(seed, rng)
+    elif template == 'rectangle':
+        around = str(rng.choice(AROUND))
+        width, height = (float(v) for v in rng.choice(SIDES, 2))
+        piece = layout.location(around)
+        if width / 2 < piece.size[0] / 2 + 0.45 or height / 2 < piece.size[1] / 2 + 0.45:
+            return None  # the legs would pass over the furniture
+        corners = rectangle_corners(around, width, height)
+        if not all(_GRID.is_free(corner) for corner in corners):
+            return None
+        instructions = (f'move in a {width:g}m by {height:g}m rectangle around the {around}',)
+        attributes.update(around=around, width=width, height=height)
+        scene = _scene(seed, rng)
+    elif template == 'back_and_forth':
+        first, second = (str(v) for v in rng.choice(GOTO_PLACES, 2, replace=False))
+        times = int(rng.integers(2, 4))
+        instructions = (f'move back and forth between the {first} and the {second} {times} times',)
+        attributes.update(first=first, second=second, times=times)
+        scene = _scene(seed, rng)
+    elif template == 'fetch':
+        destination = str(rng.choice(objects.SURFACES))
+        thing = str(rng.choice(objects.OBJECT_NAMES))
+        scene = _scene(seed, rng, keep_free=layout.location(destination).centre, must_have=(thing,))
+        if scene is None or objects.surface_of(*scene[0].xy) == destination:
+            return None
+        instructions = (f'bring the {thing} to the {destination}',)
+        attributes.update(object=thing, destination=destination)
+    elif template == 'bin':
+        thing = str(rng.choice(objects.OBJECT_NAMES))
+        bin_name = BINS_FOR[objects.GROUPS[thing]]
+        instructions = (f'put the {thing} in the {bin_name}',)
+        attributes.update(object=thing, bin=bin_name)
+        scene = _scene(seed, rng, must_have=(thing,))
+    else:  # count
+        group = str(rng.choice([objects.GROUP_SNACK, objects.GROUP_DRINK, objects.GROUP_FRUIT]))
+        surface = str(rng.choice(objects.SURFACES))
+        instructions = (f'how many {group}s are on the {surface}?',)
+        attributes.update(group=group, surface=surface)
+        scene = _scene(seed, rng)
+    if scene is None:
+        return None
+    return Episode(template, seed, instructions, scene, attributes)
+
+
+def rectangle_corners(around: str, width: float, height: float) -> np.ndarray:
+    centre = np.array(layout.location(around).centre)
+    return centre + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [width / 2, height / 2]
+
+
+__all__ = ['Episode', 'KitchenObject', 'TEMPLATES', 'oracle_program', 'rectangle_corners', 'sample_episode']
