@@ -18,31 +18,28 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import pathlib
 import re
 import signal
 import sys
 import threading
 import time
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 import yaml
 from cap_kitchen import layout, objects
 
+from cap_bench.episode_runs import EPISODES, lmp_parameters, load_records, run_episodes
 from cap_bench.mobile.episodes import TEMPLATES, Episode, oracle_program, rectangle_corners, sample_episode
 from cap_bench.runner import (BenchOptions, Interrupted, _raise_interrupted, _wait, add_model_arguments, domain_ids,
                               model_endpoint, model_settings, outcome_name, policy_description)
-from cap_bench.whiteboard.bench import load_records
 from cap_bringup import base_path
 from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT, HAND_WRITTEN, normalise_query
 from cap_lmp.errors import LLMError
-from cap_lmp.safe_text import one_line, terminal_text
+from cap_lmp.safe_text import one_line
 
 DEFAULT_OUT = 'output/mobile'
-EPISODES = 'episodes.jsonl'
-CASSETTE = 'oracle_cassette.yaml'
 UI_LMP = 'mobile_ui'
 SERVICE_TIMEOUT_S = 60.0
 TARGET_ORACLE_RATE = 0.98  # the bar the reference programs must clear
@@ -128,16 +125,7 @@ class MobileRunner:
         self.options = options
         self.context = Context()
         rclpy.init(context=self.context)
-        lmp: dict[str, Any] = {'time_limit_s': options.episode_timeout_s}
-        backend = 'cassette' if options.policy == 'oracle' else options.backend
-        if backend == 'local':
-            lmp.update(model_file=options.model_file, model_threads=options.model_threads)
-        elif options.policy == 'llm':
-            lmp.update(api=options.api)
-            if options.base_url:
-                lmp['base_url'] = options.base_url
-            if options.model:
-                lmp['model'] = options.model
+        backend, lmp = lmp_parameters(options)
         self.graph = Graph(self.context, GraphOptions(
             domain='mobile', llm_backend=backend, cassette=str(cassette) if cassette else '', camera_rate=0.0,
             extra={'lmp_node': lmp}))
@@ -280,41 +268,10 @@ def write_report(summary: dict, out: pathlib.Path) -> None:
 
 
 def run_benchmark(options: BenchOptions, templates: Sequence[str], resume: bool = False) -> dict:
-    out = pathlib.Path(options.out)
-    out.mkdir(parents=True, exist_ok=True)
     episodes = plan(templates, options.trials, options.base_seed)
-    done = {r['key'] for r in load_records(out)} if resume else set()
-    if not resume:
-        (out / EPISODES).write_text('', encoding='utf-8')
-    todo = [e for e in episodes if e.key not in done]
-    cassette = None
-    if options.policy == 'oracle':
-        cassette = out / CASSETTE
-        write_oracle_cassette(episodes, cassette)
-    os.environ['ROS_DOMAIN_ID'] = str(domain_ids(1, options.first_domain_id)[0])
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    started = time.monotonic()
-    runner = MobileRunner(options, cassette) if todo else None
-    try:
-        with open(out / EPISODES, 'a', encoding='utf-8') as stream:
-            for index, episode in enumerate(todo, 1):
-                try:
-                    record = runner.run(episode)
-                except TimeoutError as error:  # the graph stopped answering: this episode fails, a new graph goes on
-                    record = base_record(episode, options)
-                    record['reason'] = f'the graph stopped answering ({error})'
-                    runner.close()
-                    runner = None
-                    runner = MobileRunner(options, cassette)
-                stream.write(json.dumps(record) + '\n')
-                stream.flush()
-                verdict = 'ok' if record['success'] else f"FAILED: {terminal_text(record['reason'], limit=300)}"
-                print(f"[{index}/{len(todo)}] {episode.key}: {verdict} ({record['wall_seconds']:.1f} s)",
-                      file=sys.stderr, flush=True)
-    finally:
-        if runner is not None:
-            runner.close()
-    summary = summarise(load_records(out), policy_description(options), time.monotonic() - started)
+    seconds = run_episodes(options, episodes, resume, write_oracle_cassette, MobileRunner, base_record)
+    out = pathlib.Path(options.out)
+    summary = summarise(load_records(out), policy_description(options), seconds)
     write_report(summary, out)
     return summary
 
