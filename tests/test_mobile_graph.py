@@ -41,7 +41,8 @@ def _call(future, timeout: float = 60.0):
 def _graph_with(ros_context, cassette: Cassette, **options):
     """The mobile graph replaying `cassette`, and a user node on its executor; closed after the test."""
     cassette.save()
-    graph = Graph(ros_context, GraphOptions(domain='mobile', cassette=str(cassette.path), camera_rate=0.0, **options))
+    options = {'camera_rate': 0.0, **options}  # no images unless a test needs them
+    graph = Graph(ros_context, GraphOptions(domain='mobile', cassette=str(cassette.path), **options))
     user = rclpy.create_node('mobile_user', context=ros_context)
     graph.executor.add_node(user)
     try:
@@ -166,3 +167,40 @@ def test_a_can_is_fetched_from_where_it_stands_and_put_down_on_the_countertop(fe
     assert can.bbox_min[2] == pytest.approx(COUNTER.top, abs=0.01), 'standing on the countertop'
     for name, position in others.items():
         assert math.dist(world.object_state(name).position, position) < 0.01, f'the {name} was moved'
+
+
+@pytest.fixture
+def rgbd(ros_context, tmp_path):
+    """The mobile graph with perception from the kitchen's RGB-D detector on the head camera, and a program that
+    drives to the table and says what it sees there and where."""
+    program = ("goto_loc('table')\n"
+               "for name in get_visible_obj_names():\n"
+               "    x, y = get_obj_pos(name)\n"
+               "    say(f'{name} at {x:.3f} {y:.3f}')\n"
+               "say('that is all')")
+    cassette = Cassette(tmp_path / 'look.yaml', [CassetteEntry(
+        lmp='mobile_ui', query='what do you see on the table', context=ANY_CONTEXT, completion=program,
+        source='written by hand for the mobile graph test')])
+    yield from _graph_with(ros_context, cassette, seed=1, perception='rgbd', camera_rate=5.0)
+
+
+def test_with_the_rgbd_detector_the_robot_sees_at_the_table_what_the_simulators_ray_test_sees(rgbd):
+    """The API's visible objects come from the detector on the head camera's frames (analysed with the pose the
+    camera had at each frame, while the base drives): at the table they are the objects the simulator's ray test
+    says the camera sees, where the simulator has them."""
+    graph, user = rgbd
+    said = []
+    user.create_subscription(String, GraphNames.SAY_TOPIC, lambda msg: said.append(msg.data), 10)
+    result = _execute(user, 'what do you see on the table')
+    assert result.outcome == ExecuteCommand.Result.OUTCOME_DONE, result.message
+    assert _wait(lambda: said and said[-1] == 'that is all', 10)
+    world = graph.world
+    seen = {s.name: s.position for s in world.object_states() if s.visible}
+    assert len(seen) >= 2, 'the seed puts objects in view at the table'
+    reported = {}
+    for line in said[:-1]:
+        name, _, coordinates = line.rpartition(' at ')
+        reported[name] = tuple(float(v) for v in coordinates.split())
+    assert set(reported) == set(seen)
+    for name, xy in reported.items():
+        assert math.dist(xy, seen[name][:2]) < 0.02, name

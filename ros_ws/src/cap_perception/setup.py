@@ -17,8 +17,8 @@ setup(
     zip_safe=True,
     maintainer='cap-ros maintainers',
     maintainer_email='maintainers@cap-ros.dev',
-    description=('Object perception for cap-ros: simulator ground truth, RGB-D colour detector, YAML stub, '
-                 'perception node.'),
+    description=('Object perception for cap-ros: simulator ground truth, RGB-D colour detectors (table top, kitchen), '
+                 'YAML stub, perception node.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

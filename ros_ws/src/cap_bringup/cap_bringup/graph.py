@@ -89,13 +89,16 @@ class GraphOptions:
     def overrides(self) -> dict[str, dict[str, Any]]:
         """{node name: {parameter: value}} for the nodes of the domain's graph."""
         domain = get_domain(self.domain)
+        if self.perception == 'rgbd' and self.camera_rate <= 0:
+            raise ValueError('perception rgbd reads camera images: camera_rate must be above 0')
         lmp = {'llm_backend': self.llm_backend, 'record_cassette': self.record_cassette, 'domain': self.domain}
         if self.cassette:
             lmp['cassette'] = str(pathlib.Path(self.cassette).resolve())
         chosen = {
             'sim_bridge': {'seed': self.seed, 'objects': self.objects, 'real_time': self.real_time,
                            'camera_rate': self.camera_rate, 'scene': domain.scene},
-            'perception_node': {'source': self.perception},
+            'perception_node': {'source': self.perception,
+                                **(dict(domain.rgbd_perception) if self.perception == 'rgbd' else {})},
             # A camera sees a fresh stack only once the tool has moved out of its line of sight.
             'pick_place': {'clear_view': self.perception == 'rgbd'},
             'lmp_node': lmp,

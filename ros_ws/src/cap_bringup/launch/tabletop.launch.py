@@ -57,6 +57,8 @@ def _nodes(context):
         chosen['sim_bridge']['objects'] = value['objects']
     if value['perception']:
         chosen['perception_node']['source'] = value['perception']
+        if value['perception'] == 'rgbd':
+            chosen['perception_node'].update(domain.rgbd_perception)  # the domain's detector and camera
         chosen['pick_place']['clear_view'] = value['perception'] == 'rgbd'
     if value['llm_backend']:
         chosen['lmp_node']['llm_backend'] = value['llm_backend']

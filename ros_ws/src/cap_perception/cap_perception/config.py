@@ -7,6 +7,7 @@ from cap_ros_common.parameters import parameter
 from cap_tabletop.cameras import CAMERAS, DEFAULT_CAMERA, optical_orientation_xyzw
 
 SOURCES = ('ground_truth', 'rgbd', 'stub')
+DETECTORS = ('tabletop', 'kitchen')  # cap_perception.rgbd_detector, cap_perception.kitchen_detector
 
 
 @dataclasses.dataclass(frozen=True)
@@ -14,12 +15,20 @@ class PerceptionConfig:
     source: str = parameter('ground_truth', 'Where objects come from: ground_truth (simulator object array), rgbd '
                                             '(colour detector on camera images) or stub (YAML file).')
     stub_file: str = parameter('', 'YAML file of objects for source=stub.')
-    # For source=rgbd. The defaults are the simulated camera the detector reads by default.
+    # For source=rgbd. The defaults are the table top's detector and the simulated camera it reads.
+    detector: str = parameter('tabletop', 'What the rgbd source finds: tabletop (the blocks and bowls on the table, '
+                                          'best from the top camera) or kitchen (the kitchen\'s objects on its '
+                                          'furniture, from the mobile base\'s head camera: camera head, '
+                                          'camera_moves true).')
     camera: str = parameter(DEFAULT_CAMERA, 'Camera whose images the detector reads '
                                             '(topics <camera namespace>/<camera>/{color,depth,camera_info,pose}).')
     camera_pose_from_topic: bool = parameter(True, 'Take the camera pose from the latched <camera>/pose topic (the '
                                                    'sim bridge publishes it); false: use the camera_position and '
                                                    'camera_orientation parameters.')
+    camera_moves: bool = parameter(False, 'The camera moves with the robot (the mobile base\'s head camera): each '
+                                          'frame is analysed with the <camera>/pose message stamped as the frame '
+                                          '(the sim bridge sends one with every frame of a moving camera); false: '
+                                          'with the latest pose.')
     camera_position: tuple[float, ...] = parameter(
         tuple(CAMERAS[DEFAULT_CAMERA].position),
         'Camera optical frame origin in the world frame [m] (extrinsic calibration).')
@@ -33,5 +42,10 @@ class PerceptionConfig:
             raise ValueError(f'parameter source={self.source!r} is not one of {", ".join(SOURCES)}')
         if self.source == 'stub' and not self.stub_file:
             raise ValueError('parameter stub_file is required when source=stub')
+        if self.detector not in DETECTORS:
+            raise ValueError(f'parameter detector={self.detector!r} is not one of {", ".join(DETECTORS)}')
+        if self.camera_moves and not self.camera_pose_from_topic:
+            raise ValueError('a moving camera (camera_moves) needs camera_pose_from_topic: its pose comes with '
+                             'each frame')
         if len(self.camera_position) != 3 or len(self.camera_orientation) != 4:
             raise ValueError('camera_position needs x, y, z and camera_orientation x, y, z, w')

@@ -1,8 +1,8 @@
 """perception_node: the object services of the graph over one interchangeable source.
 
-The `source` parameter chooses where objects come from: `ground_truth` (the simulator's object array), `rgbd` (the
-colour detector on one camera's colour and depth images, run on the newest frame when a service is asked) or `stub`
-(a YAML file).
+The `source` parameter chooses where objects come from: `ground_truth` (the simulator's object array), `rgbd` (a
+colour detector on one camera's colour and depth images, run on the newest frame when a service is asked: the table
+top's or the kitchen's, the `detector` parameter) or `stub` (a YAML file).
 """
 from __future__ import annotations
 
@@ -23,14 +23,25 @@ from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.time import time_msg, to_seconds
+from cap_perception.camera_poses import CameraPoses
 from cap_perception.config import PerceptionConfig
-from cap_perception.rgbd_detector import CameraView, DetectorConfig, detect, same_view
+from cap_perception.kitchen_detector import detect_kitchen
+from cap_perception.rgbd_detector import CameraView, detect, same_view
 from cap_perception.ros_conversions import from_msg, image_to_array, to_msg
 from cap_perception.sources import (CameraMemory, NoObservationError, SnapshotSource, UnknownObjectError,
                                     load_stub_objects)
 
 # Only the latest object array matters: keep one, reliably delivered.
 OBJECTS_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+# The camera's pose is latched (a late joiner gets it); a moving camera's comes with every frame, and the images
+# queued behind it need theirs: keep several.
+POSE_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+_DETECT = {'tabletop': detect, 'kitchen': detect_kitchen}  # per value of the `detector` parameter (config.DETECTORS)
+
+
+def _nanoseconds(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
 def _pose_matrix(position, orientation_xyzw) -> np.ndarray:
@@ -74,9 +85,10 @@ class PerceptionNode(Node):
     def _start_detector(self) -> None:
         config = self.config
         camera, use_pose_topic = config.camera, config.camera_pose_from_topic
-        position, orientation = config.camera_position, config.camera_orientation
-        self._world_from_optical = None if use_pose_topic else _pose_matrix(position, orientation)
-        self._detector_config = DetectorConfig()
+        self._detect = _DETECT[config.detector]
+        self._poses = CameraPoses(moving=config.camera_moves)
+        if not use_pose_topic:
+            self._poses.add(0, _pose_matrix(config.camera_position, config.camera_orientation))
         self._memory = CameraMemory(self.source, analyse=self._analyse)
         self._last_analysis: tuple[CameraView, list] | None = None  # only touched inside CameraMemory.refresh
         self._frames_lock = threading.Lock()
@@ -96,15 +108,13 @@ class PerceptionNode(Node):
         self.create_subscription(CameraInfo, f'{prefix}/camera_info', self._on_camera_info,
                                  qos_profile_sensor_data, callback_group=images)
         if use_pose_topic:
-            # The pose is published once and latched: subscribe transient-local to get it whenever we join.
-            latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
-            self.create_subscription(PoseStamped, f'{prefix}/pose', self._on_camera_pose, latched,
+            self.create_subscription(PoseStamped, f'{prefix}/pose', self._on_camera_pose, POSE_QOS,
                                      callback_group=images)
 
     def _on_camera_pose(self, msg: PoseStamped) -> None:
         p, q = msg.pose.position, msg.pose.orientation
-        self._world_from_optical = _pose_matrix([p.x, p.y, p.z], [q.x, q.y, q.z, q.w])
+        self._poses.add(_nanoseconds(msg.header.stamp), _pose_matrix([p.x, p.y, p.z], [q.x, q.y, q.z, q.w]))
+        self._offer_frame()  # a moving camera's frame may have come before its pose
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
         self._camera_matrix = np.array(msg.k, dtype=float).reshape(3, 3)
@@ -113,32 +123,38 @@ class PerceptionNode(Node):
         with self._frames_lock:
             setattr(self, f'_{kind}', msg)
             setattr(self, f'_{kind}_received_ns', int(info.get('received_timestamp') or 0))
+        self._offer_frame()
+
+    def _offer_frame(self) -> None:
+        """Offer the newest colour and depth pair with its camera pose, to be analysed when somebody asks."""
+        with self._frames_lock:
             color, depth = self._color, self._depth
             received_ns = min(self._color_received_ns, self._depth_received_ns)
-        # Colour and depth of one frame carry the same stamp: offer the pair, analysed when somebody asks.
+        # Colour and depth of one frame carry the same stamp.
         if color is None or depth is None or color.header.stamp != depth.header.stamp:
             return
-        self._memory.offer((color, depth), to_seconds(color.header.stamp), received_ns or None)
+        pose = self._poses.at(_nanoseconds(color.header.stamp))
+        if pose is not None:
+            self._memory.offer((color, depth, pose), to_seconds(color.header.stamp), received_ns or None)
 
-    def _analyse(self, frame: tuple[Image, Image]) -> list | None:
-        """The objects in one colour and depth pair (None when it cannot be analysed yet or at all).
+    def _analyse(self, frame: tuple[Image, Image, np.ndarray]) -> list | None:
+        """The objects in one colour and depth pair seen from `pose` (None when it cannot be analysed yet or at all).
 
         A frame identical to the last one analysed (the world at rest: the simulator sends the same image with new
         stamps) has the same objects: they are reused rather than detected again.
         """
-        if self._camera_matrix is None or self._world_from_optical is None:
+        if self._camera_matrix is None:
             return None
-        color, depth = frame
+        color, depth, pose = frame
         try:
-            view = CameraView(image_to_array(color), image_to_array(depth), self._camera_matrix,
-                              self._world_from_optical)
+            view = CameraView(image_to_array(color), image_to_array(depth), self._camera_matrix, pose)
         except ValueError as error:
             self.get_logger().error(str(error), throttle_duration_sec=5.0)
             return None
         last = self._last_analysis
         if last is not None and same_view(last[0], view):
             return last[1]
-        detected = detect(view, self._detector_config)
+        detected = self._detect(view)
         self._last_analysis = (view, detected)
         return detected
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import Collection, Iterator
 
 import cv2
 import numpy as np
@@ -29,17 +30,23 @@ from cap_perception.objects import PerceivedObject
 
 
 @dataclass(frozen=True)
-class DetectorConfig:
+class ColorRegionConfig:
+    """How kept pixels become one colour's object candidates (steps 2 and 3; the kitchen's detector shares them)."""
+
+    max_color_distance: float = 0.22  # in normalised-RGB units; farther pixels are not an object colour
+    min_brightness: int = 35  # darker pixels carry no reliable colour (shadowed sides, the robot)
+    min_pixels: int = 25  # smaller regions are noise
+    join_distance: float = 0.05  # regions of one colour closer than this in the world are one object [m]
+
+
+@dataclass(frozen=True)
+class DetectorConfig(ColorRegionConfig):
     block_size: float = BLOCK_SIZE  # cube edge [m]
     bowl_diameter: float = 2 * BOWL_RIM_RADIUS  # across the rim [m]
     table_x: tuple[float, float] = TABLE_X_RANGE
     table_y: tuple[float, float] = TABLE_Y_RANGE
     min_height: float = 0.004  # above the table surface [m]; lower points are table
     max_height: float = 0.22  # higher points are the robot (the tool travels at 0.25), not objects [m]
-    max_color_distance: float = 0.22  # in normalised-RGB units; farther pixels are not an object colour
-    min_brightness: int = 35  # darker pixels carry no reliable colour (shadowed sides, the robot)
-    min_pixels: int = 25  # smaller regions are noise
-    join_distance: float = 0.05  # regions of one colour closer than this in the world are one object [m]
 
 
 @dataclass(frozen=True)
@@ -72,13 +79,21 @@ def deproject(view: CameraView) -> tuple[np.ndarray, np.ndarray]:
 
 
 @functools.lru_cache(maxsize=4)
-def _cached_rays(k: bytes, rotation: bytes, shape: tuple[int, int]) -> np.ndarray:
-    k_matrix, rotation_matrix = np.frombuffer(k).reshape(3, 3), np.frombuffer(rotation).reshape(3, 3)
+def _optical_rays(k: bytes, shape: tuple[int, int]) -> np.ndarray:
+    """Each pixel's ray in the optical frame per metre of depth: the same for every frame, moving camera or not."""
+    k_matrix = np.frombuffer(k).reshape(3, 3)
     height, width = shape
     u, v = np.meshgrid(np.arange(width, dtype=np.float32), np.arange(height, dtype=np.float32))
     optical = np.stack([(u - k_matrix[0, 2]) / k_matrix[0, 0], (v - k_matrix[1, 2]) / k_matrix[1, 1],
                         np.ones_like(u)], axis=-1)
-    rays = optical @ rotation_matrix.T.astype(np.float32)
+    optical.flags.writeable = False
+    return optical
+
+
+@functools.lru_cache(maxsize=4)
+def _cached_rays(k: bytes, rotation: bytes, shape: tuple[int, int]) -> np.ndarray:
+    rotation_matrix = np.frombuffer(rotation).reshape(3, 3)
+    rays = _optical_rays(k, shape) @ rotation_matrix.T.astype(np.float32)
     rays.flags.writeable = False
     return rays
 
@@ -89,7 +104,7 @@ def _world_rays(k: np.ndarray, rotation: np.ndarray, shape: tuple[int, int]) -> 
                         np.ascontiguousarray(rotation, dtype=float).tobytes(), tuple(shape))
 
 
-def label_colors(pixels: np.ndarray, config: DetectorConfig) -> np.ndarray:
+def label_colors(pixels: np.ndarray, config: ColorRegionConfig) -> np.ndarray:
     """Index into PALETTE for each RGB pixel (shape (N, 3)), -1 where no palette colour fits."""
     pixels = pixels.astype(np.float32)
     brightest = pixels.max(axis=-1, keepdims=True)
@@ -109,14 +124,24 @@ def detect(view: CameraView, config: DetectorConfig = DetectorConfig()) -> list[
     on_table = (valid & (z > config.min_height) & (z < config.max_height)
                 & (x > config.table_x[0]) & (x < config.table_x[1])
                 & (y > config.table_y[0]) & (y < config.table_y[1]))
-    # Colour only the pixels standing on the table: a few percent of the image.
-    rows, columns = np.nonzero(on_table)
-    labels = label_colors(view.rgb[rows, columns], config)
-    height, width = on_table.shape
     found: list[PerceivedObject] = []
+    for color, cluster in color_clouds(view.rgb, points, on_table, config):
+        found.extend(_classify(color, cluster, config))
+    return sorted(found, key=lambda obj: obj.name)
+
+
+def color_clouds(rgb: np.ndarray, points: np.ndarray, kept: np.ndarray, config: ColorRegionConfig,
+                 colors: Collection[str] = _PALETTE_NAMES) -> Iterator[tuple[str, np.ndarray]]:
+    """(palette colour, world points (N, 3)) of every object candidate of `colors` among the `kept` pixels: each
+    kept pixel labelled with its nearest palette colour, connected regions per colour, joined when they lie close
+    together in the world."""
+    # Colour only the kept pixels: a few percent of the image.
+    rows, columns = np.nonzero(kept)
+    labels = label_colors(rgb[rows, columns], config)
+    height, width = kept.shape
     for index, color in enumerate(_PALETTE_NAMES):
         chosen = labels == index
-        if np.count_nonzero(chosen) < config.min_pixels:
+        if color not in colors or np.count_nonzero(chosen) < config.min_pixels:
             continue
         # Work in the window around this colour's pixels (with a margin the 3x3 opening needs), not the image.
         r, c = rows[chosen], columns[chosen]
@@ -127,14 +152,14 @@ def detect(view: CameraView, config: DetectorConfig = DetectorConfig()) -> list[
         # Opening removes single stray pixels (edges blending two colours) before grouping.
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _OPENING)
         for cluster in _objects_of_one_color(mask, points[top:bottom, left:right], config):
-            found.extend(_classify(color, cluster, config))
-    return sorted(found, key=lambda obj: obj.name)
+            yield color, cluster
 
 
 _OPENING = np.ones((3, 3), np.uint8)
 
 
-def _objects_of_one_color(mask: np.ndarray, points: np.ndarray, config: DetectorConfig) -> list[np.ndarray]:
+def _objects_of_one_color(mask: np.ndarray, points: np.ndarray,
+                          config: ColorRegionConfig) -> list[np.ndarray]:
     """World points per object candidate: connected regions, joined when they lie close together in the world."""
     count, regions, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     groups: list[np.ndarray] = []

@@ -23,7 +23,9 @@ def test_defaults_are_the_simulated_top_camera():
     config.validate()
 
 
-@pytest.mark.parametrize('changes', [{'source': 'sonar'}, {'source': 'stub'}, {'camera_position': (0.0, 1.0)}])
+@pytest.mark.parametrize('changes', [{'source': 'sonar'}, {'source': 'stub'}, {'camera_position': (0.0, 1.0)},
+                                     {'detector': 'sonar'},
+                                     {'camera_moves': True, 'camera_pose_from_topic': False}])
 def test_invalid_configs_are_refused(changes):
     with pytest.raises(ValueError):
         PerceptionConfig(**changes).validate()

@@ -79,3 +79,54 @@ def test_stub_source_serves_the_file(ros_context, graph, spin_until, tmp_path):
 def test_unknown_source_is_refused_at_start(ros_context):
     with pytest.raises(ValueError, match='not one of'):
         PerceptionNode(context=ros_context, parameter_overrides=[Parameter('source', value='lidar')])
+
+
+def test_a_moving_cameras_frame_is_analysed_with_the_pose_stamped_as_the_frame(ros_context, graph, spin_until):
+    """The head camera moves with the base: a frame waits for the pose of its own stamp, which may come after its
+    images, and is never analysed with the latest pose of another moment (here: where the base started)."""
+    import math
+
+    from cap_kitchen import layout, robot
+    from cap_sim_bridge import ros_conversions as conv
+    from cap_sim_bridge.bridge_node import IMAGE_QOS, LATCHED_QOS
+    from cap_sim_bridge.world import TabletopWorld
+    from geometry_msgs.msg import PoseStamped
+    from sensor_msgs.msg import CameraInfo, Image
+
+    world = TabletopWorld('kitchen', seed=1)
+    start_pose = world.camera_pose(robot.HEAD_CAMERA)
+    end = world.follow_base_trajectory([8.0], [list(layout.location('table').approach())])  # a straight drive
+    world.run_for(end - world.time + 0.5)
+    rgb, depth = world.render(robot.HEAD_CAMERA, 640, 480)
+    seen = {s.name: s.position for s in world.object_states() if s.visible}
+    assert len(seen) >= 2
+
+    add, executor = graph
+    add(PerceptionNode(context=ros_context, parameter_overrides=[
+        Parameter('source', value='rgbd'), Parameter('detector', value='kitchen'),
+        Parameter('camera', value=robot.HEAD_CAMERA), Parameter('camera_moves', value=True)]))
+    camera = add(Node('head_camera', context=ros_context))
+    prefix = f'{GraphNames.CAMERA_NAMESPACE}/{robot.HEAD_CAMERA}'
+    publishers = {kind: camera.create_publisher(kind_type, f'{prefix}/{kind}', qos) for kind, kind_type, qos in (
+        ('pose', PoseStamped, LATCHED_QOS), ('color', Image, IMAGE_QOS), ('depth', Image, IMAGE_QOS),
+        ('camera_info', CameraInfo, IMAGE_QOS))}
+    names = camera.create_client(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE)
+    state = camera.create_client(GetObjectState, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE)
+    assert spin_until(executor, lambda: all(p.get_subscription_count() == 1 for p in publishers.values()))
+
+    publishers['pose'].publish(conv.pose_stamped_msg(1.0, start_pose))  # the latest pose, of an earlier moment
+    intrinsics = world.camera_intrinsics(robot.HEAD_CAMERA, 640, 480)
+    publishers['camera_info'].publish(conv.camera_info_msg(2.0, robot.HEAD_CAMERA, intrinsics))
+    publishers['color'].publish(conv.color_image_msg(2.0, robot.HEAD_CAMERA, rgb))
+    publishers['depth'].publish(conv.depth_image_msg(2.0, robot.HEAD_CAMERA, depth))
+    executor.spin_once(timeout_sec=0.5)
+    assert _call(executor, spin_until, names, GetObjectNames.Request()).names == [], 'analysed without its pose'
+
+    publishers['pose'].publish(conv.pose_stamped_msg(2.0, world.camera_pose(robot.HEAD_CAMERA)))
+    assert spin_until(executor, lambda: _call(executor, spin_until, names, GetObjectNames.Request()).names
+                      == sorted(seen))
+    for name, position in seen.items():
+        answer = _call(executor, spin_until, state, GetObjectState.Request(name=name))
+        point = answer.state.position
+        assert math.dist((point.x, point.y, point.z), position) < 0.015, name
+    world.close()

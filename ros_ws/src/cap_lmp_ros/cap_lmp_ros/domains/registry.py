@@ -99,6 +99,9 @@ class Domain:
     function_arguments: tuple[str, ...] = ()
     query_functions: tuple[str, ...] = ()
     describe_call: Callable[[PlannedCall], PlanStep] = describe_as_call
+    # perception_node's parameters when its objects come from the RGB-D detector (`cap up --perception rgbd`): which
+    # detector and camera, as (name, value) pairs; none: the table top's detector on the top camera.
+    rgbd_perception: tuple[tuple[str, Any], ...] = ()
 
     @property
     def plan_functions(self) -> tuple[str, ...]:
