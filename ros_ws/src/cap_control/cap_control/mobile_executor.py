@@ -100,7 +100,8 @@ class MobilePickPlaceExecutor:
             raise Failed(MobileErrorCode.HANDS_FULL, f'the gripper holds the {self.held.name}; put it down first')
         found = self._find(run, name, MobileErrorCode.OBJECT_NOT_FOUND)
         piece = self._surface(found.info.position, f'the {found.info.name}')
-        self._drive(run, reach_pose(found.info.position, piece, self.grid), feedback)
+        keep_clear = self._others_on(run, piece, found.info.name)
+        self._drive(run, reach_pose(found.info.position, piece, self.grid, keep_clear=keep_clear), feedback)
         seen = self._find(run, found.info.name, MobileErrorCode.OBJECT_NOT_FOUND)
         base = self._base_pose(run)
         plan, held = plan_pick(object_in_arm_frame(seen.info, base), seen.info, run.current_joints(), self.config)
@@ -127,7 +128,8 @@ class MobilePickPlaceExecutor:
         if piece.kind == 'bin':  # let it fall in from above the rim: the arm does not reach down into a bin
             drop_from = piece.top - robot.ARM_MOUNT[2]
             what = f'the {piece.name}'
-        self._drive(run, reach_pose(xy, piece, self.grid), feedback)
+        keep_clear = self._others_on(run, piece, held.name)
+        self._drive(run, reach_pose(xy, piece, self.grid, keep_clear=keep_clear), feedback)
         base = self._base_pose(run)
         spot = to_arm((xy[0], xy[1], rest_z), base)
         plan = plan_place(held, spot, (xy[0], xy[1], rest_z), run.current_joints(), self.config, drop_from, what)
@@ -143,6 +145,12 @@ class MobilePickPlaceExecutor:
         if not report.success:
             raise Failed(code, report.message or f'no object named {name!r}')
         return report
+
+    @staticmethod
+    def _others_on(run: PlanRun, piece: layout.Furniture, exclude: str) -> list[tuple[float, float]]:
+        """Where the other objects perception knows of stand on `piece`: the arm keeps its path clear of them."""
+        return [report.info.position[:2] for report in run.other_objects(exclude) or ()
+                if kitchen_objects.surface_of(*report.info.position[:2]) == piece.name]
 
     @staticmethod
     def _surface(xy: Sequence[float], what: str) -> layout.Furniture:

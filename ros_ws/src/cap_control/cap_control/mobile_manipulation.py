@@ -30,6 +30,10 @@ from cap_control.pick_place import (
 # gripper pointing down reaches 0.8 m at 0.25 m above its base and 0.65 m at 0.5 m (measured with its kinematics).
 REACH = 0.65  # [m]
 LATERAL_MARGIN = 0.1  # [m] the base's spot stays this far inside a side's ends
+LATERAL_STEP = 0.05  # [m] between the spots along a side the base may stand at
+# The arm, moving from the carry pose out to an object, sweeps the floor plan between its base and the object at the
+# furniture's height: an object within this of that line (a 21 cm bottle in front of an apple) would be knocked over.
+ARM_CORRIDOR = 0.12  # [m]
 # The elbow swings out beyond the base's footprint while the arm moves between the furniture and the carry pose: a
 # base that works there keeps this far from the walls (the elbow hit the wall from 0.39 m).
 WALL_CLEARANCE = 0.55  # [m] of the base's centre
@@ -74,34 +78,49 @@ def object_in_arm_frame(obj: ObjectInfo, base_pose: Sequence[float]) -> ObjectIn
                                yaw=wrap_angle(obj.yaw - float(base_pose[2])))
 
 
-def reach_pose(xy: Sequence[float], piece: layout.Furniture, grid: OccupancyGrid,
-               reach: float = REACH) -> tuple[float, float, float]:
-    """Where the base stands to reach `xy` on `piece`: facing one of its sides, across from the point, on a free
-    spot of `grid`, the nearest to the point; PickPlaceError OUTSIDE_WORKSPACE when no side is within reach."""
+def reach_pose(xy: Sequence[float], piece: layout.Furniture, grid: OccupancyGrid, reach: float = REACH,
+               keep_clear: Sequence[Sequence[float]] = ()) -> tuple[float, float, float]:
+    """Where the base stands to reach `xy` on `piece`: facing one of its sides, on a free spot of `grid`, the nearest
+    to the point whose arm path passes no object of `keep_clear` (x, y of the other objects there); the nearest spot
+    when every one has an object in the way. PickPlaceError OUTSIDE_WORKSPACE when no side is within reach."""
+    target = np.asarray(xy[:2], dtype=float)
+    others = [np.asarray(point[:2], dtype=float) for point in keep_clear]
     best = None
     for side, (nx, ny) in layout.SIDES.items():
         half_normal = abs(nx) * piece.size[0] / 2 + abs(ny) * piece.size[1] / 2
         half_side = abs(ny) * piece.size[0] / 2 + abs(nx) * piece.size[1] / 2
         lateral_axis = np.array([-ny, nx])
         limit = max(half_side - LATERAL_MARGIN, 0.0)
-        across = float(np.clip((np.asarray(xy[:2]) - piece.centre) @ lateral_axis, -limit, limit))
+        across = float(np.clip((target - piece.centre) @ lateral_axis, -limit, limit))
         distance = half_normal + layout.MANIPULATION_GAP + layout.BASE_RADIUS
-        # Straight across from the point, or (a wall or furniture there) slid along the side toward its middle.
-        for lateral in np.linspace(across, 0.0, max(2, int(abs(across) / 0.05) + 1)):
+        # Straight across from the point first, then slid along the side (a wall or furniture there, or an object in
+        # the arm's way), nearest first.
+        laterals = sorted(np.append(np.arange(-limit, limit + 1e-9, LATERAL_STEP), across),
+                          key=lambda lateral: abs(lateral - across))
+        for lateral in laterals:
             centre = np.array(piece.centre) + distance * np.array([nx, ny]) + lateral * lateral_axis
-            if grid.is_free(centre) and _clear_of_walls(centre):
+            if not (grid.is_free(centre) and _clear_of_walls(centre)):
+                continue
+            pose = (float(centre[0]), float(centre[1]), math.atan2(-ny, -nx))
+            arm = arm_pose(pose)[:2, 3]
+            gap = float(np.linalg.norm(arm - target))
+            if gap > reach:
+                continue
+            blocked = any(_segment_distance(point, arm, target) < ARM_CORRIDOR for point in others)
+            if best is None or (blocked, gap) < best[:2]:
+                best = (blocked, gap, pose)
+            if not blocked:
                 break
-        else:
-            continue
-        pose = (float(centre[0]), float(centre[1]), math.atan2(-ny, -nx))
-        gap = float(np.linalg.norm(arm_pose(pose)[:2, 3] - np.asarray(xy[:2])))
-        if gap <= reach and (best is None or gap < best[0]):
-            best = (gap, pose)
     if best is None:
         raise PickPlaceError(PickPlaceErrorCode.OUTSIDE_WORKSPACE,
                              f'({xy[0]:.2f}, {xy[1]:.2f}) on the {piece.name} is out of the arm\'s reach from every '
                              f'side the base can stand at')
-    return best[1]
+    return best[2]
+
+
+def _segment_distance(point: np.ndarray, start: np.ndarray, end: np.ndarray) -> float:
+    along = float(np.clip((point - start) @ (end - start) / max(float((end - start) @ (end - start)), 1e-12), 0, 1))
+    return float(np.linalg.norm(point - (start + along * (end - start))))
 
 
 def _clear_of_walls(xy: Sequence[float]) -> bool:
@@ -136,7 +155,9 @@ def plan_pick(obj: ObjectInfo, world_obj: ObjectInfo, joints: Sequence[float],
     # object (a bottle) near enough its top that the palm stays above it.
     grasp_z = max(obj.bottom + config.grasp_height_fraction * obj.size[2], obj.bottom + MIN_GRASP_HEIGHT,
                   obj.top - MAX_GRASP_DEPTH)
-    above_z = obj.top + APPROACH_CLEARANCE
+    # The arm comes out of the carry pose at its height (or higher), then goes straight down: moving out lower, the
+    # arm swept a can standing beside the object off the desk.
+    above_z = max(obj.top + APPROACH_CLEARANCE, robot.CARRY_TCP[2])
     planner = _Planner(config, joints)
     x, y = obj.position[:2]
     yaw = planner.best_yaw((x, y, above_z), [obj.yaw + quarter * math.pi / 2 + k * math.pi for k in (-1, 0, 1)],

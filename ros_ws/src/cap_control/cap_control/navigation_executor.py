@@ -59,8 +59,10 @@ class NavigationConfig:
     feedback_period: float = parameter(0.2, 'Wall time between feedback messages [s].')
 
     def limits(self) -> FollowerLimits:
+        """The follower's limits. Its drive, timed on an ideal base, ends within half the goal tolerances: at the full
+        tolerance it could end on their edge, and the real base's few milliradians of tracking error fail the goal."""
         return FollowerLimits(self.max_speed, self.max_acceleration, self.max_yaw_rate, self.max_yaw_acceleration,
-                              self.look_ahead, self.position_tolerance, self.yaw_tolerance)
+                              self.look_ahead, self.position_tolerance / 2, self.yaw_tolerance / 2)
 
     def grid(self) -> OccupancyGrid:
         """The kitchen's furniture on a grid, inflated so that the base's centre may stand on every free cell."""

@@ -167,23 +167,22 @@ class PlanRun(GoalRun):
         self.available(self.perception.state_service_ready(), self.perception.service_description)
         return self.answer(self.perception.object_state(name), self.timeouts.service_timeout, 'perception')
 
+    def other_objects(self, exclude: str) -> list[ObjectReport] | None:
+        """Every object perception knows of (seen now or remembered) but `exclude`; None when it cannot list them."""
+        if not self.perception.names_available():
+            return None
+        names = self.answer(self.perception.object_names(), self.timeouts.service_timeout, 'perception')
+        reports = [self.object_state(name) for name in names if name != exclude]
+        return [report for report in reports if report.success]
+
     def objects_in_view(self, exclude: str) -> list[ObjectInfo] | None:
         """The other objects in view: the carried object passes over them and the fingers keep clear of them.
 
         Objects perception only remembers (not in view now) are left out: their last known place may be stale.
         None when perception cannot list them.
         """
-        if not self.perception.names_available():
-            return None
-        names = self.answer(self.perception.object_names(), self.timeouts.service_timeout, 'perception')
-        others = []
-        for name in names:
-            if name == exclude:
-                continue
-            report = self.object_state(name)
-            if report.success and report.visible:
-                others.append(report.info)
-        return others
+        others = self.other_objects(exclude)
+        return None if others is None else [report.info for report in others if report.visible]
 
     def current_joints(self) -> np.ndarray:
         return np.asarray(self.wait(self.arm.joints(), self.timeouts.server_timeout,

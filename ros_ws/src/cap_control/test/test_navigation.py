@@ -50,7 +50,7 @@ def test_a_free_spot_walled_in_is_unreachable():
     assert error.value.code == NavigateErrorCode.UNREACHABLE
 
 
-@pytest.mark.parametrize('name', ['countertop', 'desk', 'barstool', 'recycle bin'])
+@pytest.mark.parametrize('name', ['countertop', 'desk', 'barstool', 'blue bin'])
 def test_the_follower_ends_within_5_cm_and_0_05_rad_without_touching_anything_and_within_the_limits(kitchen, name):
     raw, grid = kitchen
     goal = location(name).approach()
