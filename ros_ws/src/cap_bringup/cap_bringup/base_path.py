@@ -37,6 +37,16 @@ def visits(path: np.ndarray, places: dict[str, Sequence[float]], within: float =
     return order
 
 
+def round_visits(path: np.ndarray, corners: Sequence[Sequence[float]],
+                 within: float = REACHED) -> tuple[list[int], bool]:
+    """The corners (indices into `corners`, a polygon's in order) the base stopped by, in order (`visits`), and
+    whether it went round them in turn: each visit the next corner after the one before, or each the one before it
+    (either way round), from any corner."""
+    order = [int(i) for i in visits(path, {str(i): corner for i, corner in enumerate(corners)}, within)]
+    turns = {(after - before) % len(corners) for before, after in zip(order, order[1:])}
+    return order, bool(order) and (turns <= {1} or turns <= {len(corners) - 1})
+
+
 def winding_turns(path: np.ndarray, point: Sequence[float]) -> float:
     """How many times the path went around `point` (signed, counterclockwise positive): its swept angle / 2 pi."""
     offsets = np.asarray(path)[:, :2] - np.asarray(point[:2], dtype=float)
@@ -105,4 +115,5 @@ def draw_map(paths: Sequence[tuple[str, np.ndarray]], out: pathlib.Path) -> path
     return out
 
 
-__all__ = ['REACHED', 'clearance_from', 'closest_approach', 'draw_map', 'missed_points', 'visits', 'winding_turns']
+__all__ = ['REACHED', 'clearance_from', 'closest_approach', 'draw_map', 'missed_points', 'round_visits', 'visits',
+           'winding_turns']

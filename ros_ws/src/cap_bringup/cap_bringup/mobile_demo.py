@@ -6,7 +6,8 @@ By default every answer comes from the mobile domain's cassette of hand-written 
 model). Each command's code, words and outcome are printed and checked on the base's path, recorded from the
 simulator while it runs: the corners of a rectangle reached, the same rectangle turned, a loop around the chairs,
 visits to two places in turn, a distance said; a count of snacks, a bottle fetched to the middle of the fruits and
-things put away in their bins are checked on the simulator's objects. DIR gets
+things put away in their bins are checked on the simulator's objects; a search round the barstool that stops at a
+corner from which the head camera sees the banana, on the base's path and the simulator's view. DIR gets
 map.png (the kitchen from above with each command's path), a video of the run from the camera that follows the
 robot (demo.mp4) and summary.json. Exit code 0 when every
 command did what it should; 130 on Ctrl-C (the graph is closed first).
@@ -42,6 +43,8 @@ RECTANGLE = CHAIR + np.array([[-1.5, -1.0], [1.5, -1.0], [1.5, 1.0], [-1.5, 1.0]
 _TURN = np.radians(-45)
 TURNED_RECTANGLE = CHAIR + (RECTANGLE - CHAIR) @ np.array([[math.cos(_TURN), -math.sin(_TURN)],
                                                            [math.sin(_TURN), math.cos(_TURN)]]).T
+BARSTOOL_SQUARE = np.array(layout.location('barstool').centre) + np.array([[-0.75, -0.75], [0.75, -0.75],
+                                                                           [0.75, 0.75], [-0.75, 0.75]])
 
 
 def _reached(points: np.ndarray, what: str) -> Check:
@@ -123,6 +126,20 @@ def _keeps_off(name: str) -> Check:
     return check
 
 
+def _found_from_a_corner(name: str, corners: np.ndarray) -> Check:
+    """Went round the corners in turn (either way) and stopped at one from which the head camera sees `name`."""
+    def check(path: Path, said: list[str], objects: Objects) -> str:
+        order, in_turn = base_path.round_visits(path, corners)
+        if not in_turn:
+            return f'the base did not go round the square: corners in the order {order}'
+        gap = math.dist(path[-1], corners[order[-1]])
+        if gap > base_path.REACHED:
+            return f'the base stopped {gap:.2f} m from corner {order[-1]}'
+        state = next((s for s in objects if s.name == name), None)
+        return '' if state is not None and state.visible else f'the head camera does not see the {name} at the stop'
+    return check
+
+
 @dataclass(frozen=True)
 class Step:
     command: str
@@ -141,15 +158,27 @@ STEPS = (
     Step('how many snacks are on the table?', (_counted_on(kitchen_objects.GROUP_SNACK, 'table'),)),
     Step('take the water bottle from the desk and put it in the middle of the fruits on the table',
          (_near('water bottle', _fruit_centre, 0.05, 'the middle of the fruits'),)),
+    # The bins are named by colour; the user says which is which, and the session remembers it.
+    Step('go to the green bin', ()),
+    Step('this is the compost bin', ()),
+    Step('go to the blue bin', ()),
+    Step('this is the recycle bin', ()),
+    Step('go to the grey bin', ()),
+    Step('this is the landfill bin', ()),
     Step('the coke can and the apple are on the table', ()),
     Step('put away the coke can and the apple on their corresponding bins',
-         (_in_bin('coke can', 'recycle bin'), _in_bin('apple', 'compost bin'))),
+         (_in_bin('coke can', 'blue bin'), _in_bin('apple', 'green bin'))),
+    # The banana on the countertop is out of the head camera's view at the bins, in view from the square's first
+    # corner facing the barstool.
+    Step('go in a 1.5m square around the barstool as many times as needed, check each step if there is a banana, '
+         'only stop moving when you see the banana', (_found_from_a_corner('banana', BARSTOOL_SQUARE),)),
 )
 
-# The scene: fruit, a can and a snack on the table, the water bottle on the desk, a can on the countertop, placed
-# where the arm reaches them and where "the middle of the fruits" is free [m].
-SCENE = {'coke can': (1.4, 0.85), 'apple': (1.7, 0.72), 'orange': (2.5, 0.72), 'banana': (2.1, 0.88),
-         'chips bag': (2.3, 0.75), 'water bottle': (3.0, -2.3), 'sprite can': (-1.0, 2.2)}
+# The scene: fruit, a can and a snack on the table, the water bottle on the desk, a can on the countertop, the banana
+# on the countertop (for the search), placed where the arm reaches them and where "the middle of the fruits" is
+# free [m].
+SCENE = {'coke can': (1.4, 0.85), 'apple': (1.7, 0.72), 'orange': (2.5, 0.72), 'banana': (-2.0, 2.6),
+         'chips bag': (2.3, 0.75), 'water bottle': (3.0, -2.3), 'sprite can': (-1.0, 2.55)}
 
 
 class PathRecorder:

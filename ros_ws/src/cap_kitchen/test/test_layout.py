@@ -44,6 +44,6 @@ def test_the_start_is_clear_of_everything():
 def test_locations_are_found_as_people_write_them_and_unknown_ones_are_named():
     assert location('The Table').name == 'table'
     assert location('office_chair').name == 'office chair'
-    assert set(BIN_NAMES) == {'compost bin', 'recycle bin', 'landfill bin'}
+    assert set(BIN_NAMES) == {'green bin', 'blue bin', 'grey bin'}
     with pytest.raises(UnknownLocationError, match="no location called 'sofa'.*countertop"):
         location('sofa')

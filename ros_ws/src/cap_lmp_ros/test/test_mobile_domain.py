@@ -36,7 +36,9 @@ class Base:
                 'get_loc_pos': lambda name: np.array(layout.location(location_name(name)).centre),
                 'get_robot_pos_and_angle': lambda: (self.pose[:2].copy(), float(self.pose[2])),
                 'goto_pos': self.goto_pos, 'goto_loc': self.goto_loc, 'follow_traj': self.follow_traj,
-                'say': self.said.append}
+                'pick_obj': lambda name: self.drives.append(('pick', name)),
+                'place_at_pos': lambda pos: self.drives.append(('place', floor_point(pos))),
+                'place_at_obj': lambda name: self.drives.append(('place on', name)), 'say': self.said.append}
 
     def goto_loc(self, name):
         self.pose = np.array(layout.location(location_name(name)).approach())
@@ -78,6 +80,21 @@ def test_the_reference_session_drives_the_papers_shapes_and_remembers_the_last_o
     assert robot.said[0].endswith('meters from the desk')
     assert robot.said[1] == 'There are 2 snacks on the table'
 
+
+
+def test_the_session_remembers_which_bin_is_which_and_puts_things_away_there():
+    """The paper's "this is the compost bin": the bins are named by colour, the user says what each one takes."""
+    domain = get_domain('mobile')
+    robot = Base()
+    engine = domain.build_engine(robot.functions(), CassetteClient(domain.cassette))
+    for command in ('go to the green bin', 'this is the compost bin', 'go to the blue bin', 'this is the recycle bin',
+                    'go to the grey bin', 'this is the landfill bin', 'the coke can and the apple are on the table',
+                    'put away the coke can and the apple on their corresponding bins'):
+        result = engine.run(command)
+        assert result.success, (command, result.error)
+    handled = [(kind, tuple(np.round(target, 3)) if kind == 'place' else target) for kind, target in robot.drives[3:]]
+    assert handled == [('pick', 'coke can'), ('place', layout.location('blue bin').centre),
+                       ('pick', 'apple'), ('place', layout.location('green bin').centre)]
 
 
 def test_every_place_the_reference_session_drives_to_is_free_for_the_base():

@@ -40,8 +40,8 @@ _VISUAL = {'contype': 0, 'conaffinity': 0}
 _BOX = mujoco.mjtGeom.mjGEOM_BOX
 _WOOD, _LEGS, _WALL = [0.72, 0.6, 0.45, 1], [0.3, 0.3, 0.32, 1], [0.9, 0.9, 0.87, 1]
 _COLOURS = {'countertop': [0.85, 0.85, 0.82, 1], 'office chair': [0.15, 0.15, 0.18, 1], 'chair': [0.55, 0.4, 0.28, 1],
-            'barstool': [0.25, 0.25, 0.27, 1], 'compost bin': [0.25, 0.55, 0.25, 1],
-            'recycle bin': [0.2, 0.35, 0.75, 1], 'landfill bin': [0.3, 0.3, 0.3, 1]}
+            'barstool': [0.25, 0.25, 0.27, 1], 'green bin': [0.25, 0.55, 0.25, 1],
+            'blue bin': [0.2, 0.35, 0.75, 1], 'grey bin': [0.3, 0.3, 0.3, 1]}
 
 
 def _box(body: mujoco.MjsBody, name: str, centre: Sequence[float], half: Sequence[float], rgba, **contact) -> None:

@@ -7,6 +7,8 @@ in those joints, so a turn of more than pi is one the caller means. No ROS here;
 """
 from __future__ import annotations
 
+from typing import Sequence
+
 import mujoco
 import numpy as np
 from cap_kitchen.robot import BASE_JOINT_NAMES
@@ -47,6 +49,10 @@ class MobileBase:
     def positions(self, data: mujoco.MjData) -> np.ndarray:
         """(x, y, yaw) now."""
         return data.qpos[self._qpos_adr].copy()
+
+    def set_positions(self, data: mujoco.MjData, pose: Sequence[float]) -> None:
+        """Put the joints at (x, y, yaw) directly (the caller recomputes the kinematics; the servos are not told)."""
+        data.qpos[self._qpos_adr] = np.asarray(pose, dtype=float)[:3]
 
     def velocities(self, data: mujoco.MjData) -> np.ndarray:
         """(x', y', yaw') now, in the world frame."""

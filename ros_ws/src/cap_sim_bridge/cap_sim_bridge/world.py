@@ -449,6 +449,24 @@ class TabletopWorld:
         with self.lock:
             self._require_base().hold_here(self.data)
 
+    def visible_with_base_at(self, pose: Sequence[float], names: Sequence[str]) -> list[bool]:
+        """Whether the scene's visibility camera would see each named object with the mobile base at `pose` (x, y,
+        yaw), by the ray test of `object_states`. The base's joints are set for the test only (kinematics, no physics
+        step, no time passes) and put back before this returns: nothing in the simulation moves. For deciding what a
+        pose would show before driving there (whether a benchmark's episode can be solved)."""
+        with self.lock:
+            base = self._require_base()
+            saved = self.data.qpos.copy()
+            try:
+                base.set_positions(self.data, pose)
+                mujoco.mj_kinematics(self.model, self.data)
+                mujoco.mj_camlight(self.model, self.data)
+                return [self.object_state(name).visible for name in names]
+            finally:
+                self.data.qpos[:] = saved
+                mujoco.mj_kinematics(self.model, self.data)
+                mujoco.mj_camlight(self.model, self.data)
+
     # ------------------------------------------------------------------------------- torque control, joints, pushes
     def set_arm_torque_mode(self, enabled: bool) -> None:
         """Drive the arm's joints by torque (True: each actuator's ctrl is its joint torque [N m], within the

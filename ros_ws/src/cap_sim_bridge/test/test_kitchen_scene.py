@@ -115,3 +115,17 @@ def test_objects_stand_on_the_furniture_and_the_head_camera_sees_only_what_is_in
     assert world.base_pose()[:2] == pytest.approx(approach[:2], abs=0.01)
     now = {s.name: s.visible for s in world.object_states()}
     assert all(now[s.name] for s in seen_table), now
+
+
+def test_the_view_from_a_base_pose_is_the_view_after_driving_there_and_asking_it_moves_nothing(world):
+    names = [s.name for s in world.object_states()]
+    approach = layout.location('table').approach()
+    poses = [layout.START_POSE, approach, (0.0, 0.0, math.pi)]
+    before, time = world.base_pose(), world.time
+    views = [world.visible_with_base_at(pose, names) for pose in poses]
+    assert world.base_pose() == pytest.approx(before) and world.time == time
+    assert views[0] == [s.visible for s in world.object_states()]
+    assert any(views[1]) and not any(views[2])
+    world.follow_base_trajectory([8.0], [list(approach[:2]) + [approach[2]]])
+    world.run_for(8.5)
+    assert views[1] == [s.visible for s in world.object_states()]

@@ -31,7 +31,8 @@ import yaml
 from cap_kitchen import layout, objects
 
 from cap_bench.episode_runs import EPISODES, lmp_parameters, load_records, run_episodes
-from cap_bench.mobile.episodes import TEMPLATES, Episode, oracle_program, rectangle_corners, sample_episode
+from cap_bench.mobile.episodes import (TEMPLATES, Episode, oracle_program, rectangle_corners, sample_episode,
+                                       square_poses)
 from cap_bench.runner import (BenchOptions, Interrupted, _raise_interrupted, _wait, add_model_arguments, domain_ids,
                               model_endpoint, model_settings, outcome_name, policy_description)
 from cap_bringup import base_path
@@ -85,6 +86,8 @@ def judge(episode: Episode, path: np.ndarray, final_pose: np.ndarray, states: di
         expected = [a['first'], a['second']] * a['times']
         order = base_path.visits(path, places, REACHED)
         return '' if order[-len(expected):] == expected else f'visited {order}, not {expected}'
+    if episode.template == 'search':
+        return _judge_search(a, path, final_pose, states)
     if episode.template == 'fetch':
         state = states[a['object']]
         spot = layout.location(a['destination']).centre
@@ -99,12 +102,37 @@ def judge(episode: Episode, path: np.ndarray, final_pose: np.ndarray, states: di
         x_min, y_min, x_max, y_max = layout.location(a['bin']).footprint
         inside = x_min < state.position[0] < x_max and y_min < state.position[1] < y_max
         where = np.round(state.position, 2).tolist()
-        return '' if inside else f'the {a["object"]} is at {where}, not in the {a["bin"]}'
+        return '' if inside else f'the {a["object"]} is at {where}, not in the {a["bin"]} (told: the {a["label"]})'
     truth = sum(1 for state in states.values() if objects.GROUPS.get(state.name) == a['group']
                 and objects.surface_of(*state.position[:2]) == a['surface'])
     numbers = [int(n) for text in said for n in re.findall(r'\b\d+\b', text)]
     return '' if numbers[-1:] == [truth] else f'said {list(said)}, but there are {truth} {a["group"]}s on the ' \
         f'{a["surface"]}'
+
+
+def _judge_search(a: dict, path: np.ndarray, final_pose: np.ndarray, states: dict) -> str:
+    """Round the square's corners (from any corner, either way round), stopped at the first one from which the object
+    is seen (facing the location's centre: the episode's `seen_from`), and the head camera sees it where the base
+    stopped (the simulator's ray test now)."""
+    corners = square_poses(a['around'], a['side'])[:, :2]
+    order, in_turn = base_path.round_visits(path, corners, REACHED)
+    thing, seen_from = a['object'], a['seen_from']
+    if not order:
+        return f'the base reached no corner of the square around the {a["around"]}'
+    if not in_turn:
+        return f'the base did not go round the square: corners in the order {order}'
+    first = next((visit for visit, corner in enumerate(order) if seen_from[corner]), None)
+    if first is None:
+        return (f'the base stopped after corners {order}, before any corner the {thing} is seen from '
+                f'({[i for i, seen in enumerate(seen_from) if seen]})')
+    if first < len(order) - 1:
+        return f'the {thing} is seen from corner {order[first]}, but the base went on to corners {order[first + 1:]}'
+    gap = math.dist(final_pose[:2], corners[order[-1]])
+    if gap > REACHED:
+        return f'the base ended {gap:.3f} m from corner {order[-1]}, where the {thing} is seen from'
+    if not states[thing].visible:
+        return f'the head camera does not see the {thing} where the base ended ({np.round(final_pose, 2).tolist()})'
+    return ''
 
 
 class MobileRunner:
@@ -242,7 +270,7 @@ def summarise(records: Sequence[dict], policy: str, wall_seconds: float) -> dict
                          'percent': 100.0 * sum(r['success'] for r in mine) / len(mine),
                          'sim_seconds_median': float(np.median([r['sim_seconds'] for r in mine]))})
     total, passed = len(records), sum(r['success'] for r in records)
-    return {'title': 'Mobile kitchen: driving, fetching, putting away, counting', 'policy': policy,
+    return {'title': 'Mobile kitchen: driving, fetching, putting away, counting, searching', 'policy': policy,
             'criteria': {'reached_m': REACHED, 'heading_rad': HEADING, 'placed_m': PLACED,
                          'oracle_rate_target': TARGET_ORACLE_RATE},
             'rows': rows, 'overall': {'trials': total, 'successes': passed,

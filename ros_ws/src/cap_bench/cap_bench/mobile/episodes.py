@@ -8,8 +8,15 @@ Templates (this project's; the paper reports no number for this domain):
 - back_and_forth: "move back and forth between the table and the desk 2 times" (the visits in that order);
 - fetch: "bring the coke can to the countertop" (it ends standing on that piece of furniture, within 5 cm of the
   spot the program chose: the furniture's centre);
-- bin: "put the apple in the compost bin" (it ends inside that bin);
-- count: "how many snacks are on the table?" (the last number said is the count the simulator has).
+- bin: "go to the blue bin", "this is the compost bin", "put the apple in the compost bin" (the bins are named by
+  colour; which one is the compost bin is what the user says, a different one per episode, and the program must
+  remember it; the apple ends inside the blue bin);
+- count: "how many snacks are on the table?" (the last number said is the count the simulator has);
+- search: the paper's "go in a 1.5m square around the barstool as many times as needed, check each step if there is a
+  banana, only stop moving when you see the banana" (any location whose square has its corners on free floor, a
+  side of SIDES, any object of the scene the head camera sees from a corner of the square, facing the location's
+  centre, and not from the start pose: decided on a headless simulator, cap_bench.mobile.sightlines; the base must
+  go round the corners in order and stop at the first one from which the object is seen, and see it there).
 Every episode stands six or seven objects on the table, the countertop and the desk (cap_kitchen.objects); a
 fetch's object starts on another piece of furniture than its destination, whose centre is kept free.
 
@@ -24,14 +31,15 @@ import re
 import numpy as np
 from cap_kitchen import layout, objects
 
+from cap_bench.mobile import sightlines
 from cap_control.navigation_executor import NavigationConfig
 
-TEMPLATES = ('goto', 'rectangle', 'back_and_forth', 'fetch', 'bin', 'count')
+TEMPLATES = ('goto', 'rectangle', 'back_and_forth', 'fetch', 'bin', 'count', 'search')
 GOTO_PLACES = tuple(layout.LOCATION_NAMES)
 AROUND = ('office chair', 'chair', 'barstool')  # what rectangles go around
 SIDES = (1.5, 2.0, 2.5, 3.0)  # [m] a rectangle's sides
 PLACES_KEPT_FREE = 0.2  # [m] around a fetch's destination spot, no object at the start
-BINS_FOR = {objects.GROUP_DRINK: 'recycle bin', objects.GROUP_FRUIT: 'compost bin', objects.GROUP_SNACK: 'landfill bin'}
+BINS_FOR = dict(zip((objects.GROUP_FRUIT, objects.GROUP_DRINK, objects.GROUP_SNACK), layout.BIN_LABELS))
 _GRID = NavigationConfig().grid()
 
 
@@ -63,15 +71,22 @@ def oracle_program(instruction: str) -> str:
     if match := re.fullmatch(r'move in a ([\d.]+)m by ([\d.]+)m rectangle around the (.+)', text):
         half_w, half_h = float(match[1]) / 2, float(match[2]) / 2
         return (f'center = get_loc_pos({match[3]!r})\n'
-                f'corners = np.array([[-{half_w}, -{half_h}], [{half_w}, -{half_h}], [{half_w}, {half_h}], '
-                f'[-{half_w}, {half_h}], [-{half_w}, -{half_h}]])\n'
+                f'corners = np.array([{_corner_rows(half_w, half_h)}, [-{half_w}, -{half_h}]])\n'
                 'follow_traj(center + corners)')
+    if match := re.fullmatch(SEARCH_PATTERN, text):
+        return _search_program(match['around'], float(match['side']), match['object'])
     if match := re.fullmatch(r'move back and forth between the (.+) and the (.+) (\d+) times', text):
         return f'for _ in range({int(match[3])}):\n    goto_loc({match[1]!r})\n    goto_loc({match[2]!r})'
     if match := re.fullmatch(r'bring the (.+) to the (.+)', text):
         return f'pick_obj({match[1]!r})\nplace_at_pos(get_loc_pos({match[2]!r}))'
+    if match := re.fullmatch(r'this is the (.+ bin)', text):
+        # The bin in front of the robot: the location nearest a point ahead of it, remembered in the session.
+        return ('pos, angle = get_robot_pos_and_angle()\n'
+                'ahead = pos + 0.6 * np.array([np.cos(angle), np.sin(angle)])\n'
+                f'{_variable(match[1])} = get_loc_pos(min(get_loc_names(), '
+                'key=lambda name: np.linalg.norm(get_loc_pos(name) - ahead)))')
     if match := re.fullmatch(r'put the (.+) in the (.+ bin)', text):
-        return f'pick_obj({match[1]!r})\nplace_at_pos(get_loc_pos({match[2]!r}))'
+        return f'pick_obj({match[1]!r})\nplace_at_pos({_variable(match[2])})'
     if match := re.fullmatch(r'how many (\w+)s are on the (.+)', text):
         group, surface = match[1], match[2]
         members = sorted(name for name, g in objects.GROUPS.items() if g == group)
@@ -80,6 +95,11 @@ def oracle_program(instruction: str) -> str:
                 f'np.linalg.norm(get_obj_pos(name) - surface_pos) < {_radius(surface):.2f}]\n'
                 f'say(f"There are {{len(names)}} {group}s on the {surface}")')
     raise ValueError(f'no reference program for {instruction!r}')
+
+
+def _variable(label: str) -> str:
+    """The session variable a told fact lives in: "compost bin" -> compost_bin_pos."""
+    return re.sub(r'\W+', '_', label) + '_pos'
 
 
 def _radius(surface: str) -> float:
@@ -120,11 +140,7 @@ def _try_episode(template: str, seed: int, rng: np.random.Generator) -> Episode 
     elif template == 'rectangle':
         around = str(rng.choice(AROUND))
         width, height = (float(v) for v in rng.choice(SIDES, 2))
-        piece = layout.location(around)
-        if width / 2 < piece.size[0] / 2 + 0.45 or height / 2 < piece.size[1] / 2 + 0.45:
-            return None  # the legs would pass over the furniture
-        corners = rectangle_corners(around, width, height)
-        if not all(_GRID.is_free(corner) for corner in corners):
+        if not _fits_around(around, width, height):
             return None
         instructions = (f'move in a {width:g}m by {height:g}m rectangle around the {around}',)
         attributes.update(around=around, width=width, height=height)
@@ -145,10 +161,12 @@ def _try_episode(template: str, seed: int, rng: np.random.Generator) -> Episode 
         attributes.update(object=thing, destination=destination)
     elif template == 'bin':
         thing = str(rng.choice(objects.OBJECT_NAMES))
-        bin_name = BINS_FOR[objects.GROUPS[thing]]
-        instructions = (f'put the {thing} in the {bin_name}',)
-        attributes.update(object=thing, bin=bin_name)
+        bin_name, label = str(rng.choice(layout.BIN_NAMES)), BINS_FOR[objects.GROUPS[thing]]
+        instructions = (f'go to the {bin_name}', f'this is the {label}', f'put the {thing} in the {label}')
+        attributes.update(object=thing, bin=bin_name, label=label)
         scene = _scene(seed, rng, must_have=(thing,))
+    elif template == 'search':
+        return _try_search(seed, rng)
     else:  # count
         group = str(rng.choice([objects.GROUP_SNACK, objects.GROUP_DRINK, objects.GROUP_FRUIT]))
         surface = str(rng.choice(objects.SURFACES))
@@ -165,4 +183,78 @@ def rectangle_corners(around: str, width: float, height: float) -> np.ndarray:
     return centre + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [width / 2, height / 2]
 
 
-__all__ = ['Episode', 'KitchenObject', 'TEMPLATES', 'oracle_program', 'rectangle_corners', 'sample_episode']
+def _corner_rows(half_w: float, half_h: float) -> str:
+    """A program's rows of rectangle_corners' offsets from the centre (the same order)."""
+    return f'[-{half_w}, -{half_h}], [{half_w}, -{half_h}], [{half_w}, {half_h}], [-{half_w}, {half_h}]'
+
+
+def _fits_around(around: str, width: float, height: float) -> bool:
+    """Whether a rectangle around the location keeps its legs off the furniture and its corners on free floor."""
+    piece = layout.location(around)
+    if width / 2 < piece.size[0] / 2 + 0.45 or height / 2 < piece.size[1] / 2 + 0.45:
+        return False  # the legs would pass over the furniture
+    return all(_GRID.is_free(corner) for corner in rectangle_corners(around, width, height))
+
+
+# ------------------------------------------------------------------------------------------- search
+SEARCH_PATTERN = (r'go in a (?P<side>[\d.]+)m square around the (?P<around>.+) as many times as needed, check each '
+                  r'step if there is an? (?P<object>.+), only stop moving when you see the (?P=object)')
+# Squares that fit: (location, side). Any piece of furniture, not only the seats rectangles go around.
+SEARCH_SQUARES: tuple[tuple[str, float], ...] = tuple(
+    (name, side) for name in layout.LOCATION_NAMES for side in SIDES if _fits_around(name, side, side))
+# Laps of the reference program before it gives up. The kitchen does not change while the robot searches, so a lap
+# that did not see the object would not see it again, except when a look came before perception caught up with the
+# stopped base; the bound ends the program well within the sandbox's time limit (a lap of a 2.5 m square takes about
+# 40 s of driving) and lets it say that it did not find the object.
+SEARCH_LAPS = 3
+
+
+def search_instruction(around: str, side: float, thing: str) -> str:
+    article = 'an' if thing[0] in 'aeiou' else 'a'
+    return (f'go in a {side:g}m square around the {around} as many times as needed, check each step if there is '
+            f'{article} {thing}, only stop moving when you see the {thing}')
+
+
+def square_poses(around: str, side: float) -> np.ndarray:
+    """(x, y, yaw) of the corners of a search's square, in rectangle_corners' order (counterclockwise from -x, -y),
+    each facing the location's centre: where the searching robot looks from."""
+    corners = rectangle_corners(around, side, side)
+    toward = np.array(layout.location(around).centre) - corners
+    return np.column_stack([corners, np.arctan2(toward[:, 1], toward[:, 0])])
+
+
+def _search_program(around: str, side: float, thing: str) -> str:
+    half = side / 2
+    return (f'center = get_loc_pos({around!r})\n'
+            f'corners = center + np.array([{_corner_rows(half, half)}])\n'
+            'seen = False\n'
+            f'for lap in range({SEARCH_LAPS}):\n'
+            '    for corner in corners:\n'
+            '        offset = center - corner\n'
+            '        goto_pos(corner, angle=np.arctan2(offset[1], offset[0]))\n'
+            f'        if is_obj_visible({thing!r}):\n'
+            '            seen = True\n'
+            '            break\n'
+            '    if seen:\n'
+            '        break\n'
+            f'say({f"I see the {thing}"!r} if seen else '
+            f'{f"I went around the {around} {SEARCH_LAPS} times and did not see the {thing}"!r})')
+
+
+def _try_search(seed: int, rng: np.random.Generator) -> Episode | None:
+    around, side = SEARCH_SQUARES[int(rng.integers(len(SEARCH_SQUARES)))]
+    scene = _scene(seed, rng)
+    start = np.array(layout.START_POSE)
+    seen = sightlines.sightings([(o.name, o.xy) for o in scene], np.vstack([start, square_poses(around, side)]), seed)
+    # Solvable and worth a search: out of view at the start, in view from a corner, every corner's answer certain.
+    candidates = sorted(name for name, views in seen.items()
+                        if views[0] is False and None not in views[1:] and any(views[1:]))
+    if not candidates:
+        return None
+    thing = str(rng.choice(candidates))
+    return Episode('search', seed, (search_instruction(around, side, thing),), scene,
+                   {'around': around, 'side': side, 'object': thing, 'seen_from': seen[thing][1:]})
+
+
+__all__ = ['Episode', 'KitchenObject', 'TEMPLATES', 'oracle_program', 'rectangle_corners', 'sample_episode',
+           'search_instruction', 'square_poses']
