@@ -171,7 +171,8 @@ class PlanRun(GoalRun):
         """Every object perception knows of (seen now or remembered) but `exclude`; None when it cannot list them."""
         if not self.perception.names_available():
             return None
-        names = self.answer(self.perception.object_names(), self.timeouts.service_timeout, 'perception')
+        names = self.answer(self.perception.object_names(visible_only=False), self.timeouts.service_timeout,
+                            'perception')
         reports = [self.object_state(name) for name in names if name != exclude]
         return [report for report in reports if report.success]
 

@@ -53,8 +53,8 @@ class PerceptionPort(Perception):
     def names_available(self) -> bool:
         return self._node.names_client.service_is_ready()
 
-    def object_names(self) -> Future:
-        return relay(self._node.names_client.call_async(GetObjectNames.Request(visible_only=True)),
+    def object_names(self, visible_only: bool = True) -> Future:
+        return relay(self._node.names_client.call_async(GetObjectNames.Request(visible_only=visible_only)),
                       lambda response: list(response.names))
 
     def object_state(self, name: str) -> Future:

@@ -127,8 +127,9 @@ class Perception(abc.ABC):
         """Whether the object names service can be called now (it is not waited for)."""
 
     @abc.abstractmethod
-    def object_names(self) -> Future:
-        """Completes with the names of the objects in view now (list[str])."""
+    def object_names(self, visible_only: bool = True) -> Future:
+        """Completes with the names of the objects in view now (list[str]); with `visible_only` False, of every
+        object perception knows of (also those it remembers out of view)."""
 
     @abc.abstractmethod
     def object_state(self, name: str) -> Future:

@@ -40,8 +40,10 @@ class Goal(PendingGoal):
 class Robot(Arm, Gripper, Perception, Navigator):
     """Every port at once: objects by name, a navigator that records its goals and fails when told to."""
 
-    def __init__(self, objects: dict[str, tuple[float, float, float]], navigation_code: int = 0):
+    def __init__(self, objects: dict[str, tuple[float, float, float]], navigation_code: int = 0,
+                 out_of_view: tuple[str, ...] = ()):
         self.objects = objects
+        self.out_of_view = out_of_view  # remembered by perception, not seen now
         self.navigation_code = navigation_code
         self.goals: list[tuple[float, float, float]] = []
 
@@ -52,15 +54,15 @@ class Robot(Arm, Gripper, Perception, Navigator):
     def names_available(self) -> bool:
         return True
 
-    def object_names(self) -> Future:
-        return done(list(self.objects))
+    def object_names(self, visible_only: bool = True) -> Future:
+        return done([name for name in self.objects if not (visible_only and name in self.out_of_view)])
 
     def object_state(self, name: str) -> Future:
         if name not in self.objects:
             return done(ObjectReport(False, f'no object named {name!r}'))
         x, y, z = self.objects[name]
         info = ObjectInfo(name, (x, y, z), (0.066, 0.066, 0.122))
-        return done(ObjectReport(True, '', info, (x, y, z), True, 0.0))
+        return done(ObjectReport(True, '', info, (x, y, z), name not in self.out_of_view, 0.0))
 
     # navigation
     def server_ready(self) -> Future:
@@ -128,3 +130,20 @@ def test_the_base_is_sent_to_face_the_table_from_the_near_side_and_a_failed_driv
     x, y, yaw = robot_.goals[0]
     assert x == pytest.approx(ON_TABLE[0]) and y < TABLE.footprint[1] - layout.BASE_RADIUS
     assert yaw == pytest.approx(np.pi / 2)
+
+
+def test_the_base_stands_aside_of_an_object_in_the_arms_way_even_one_out_of_the_cameras_view():
+    """A bottle in front of the can, remembered by perception but not seen from where the robot is: straight across
+    from the can, the arm moving out would knock it over, so the base stands further along the table's side."""
+    can = (TABLE.centre[0], TABLE.footprint[1] + 0.3, TABLE.top + 0.061)
+    bottle = (TABLE.centre[0] - 0.065, TABLE.footprint[1] + 0.13, TABLE.top + 0.105)
+    robot_ = Robot({'coke can': can, 'water bottle': bottle}, navigation_code=9101, out_of_view=('water bottle',))
+    executor(robot_).run(MobileRequest(TASK_PICK, 'coke can'), Interruption())
+    x, y, yaw = robot_.goals[0]
+    assert x - can[0] >= 0.1 and y < TABLE.footprint[1] and yaw == pytest.approx(np.pi / 2), 'away from the bottle'
+    seen_only = Robot({'coke can': can, 'water bottle': bottle}, navigation_code=9101)
+    executor(seen_only).run(MobileRequest(TASK_PICK, 'coke can'), Interruption())
+    assert seen_only.goals == robot_.goals, 'the same spot whether the bottle is seen now or remembered'
+    alone = Robot({'coke can': can}, navigation_code=9101)
+    executor(alone).run(MobileRequest(TASK_PICK, 'coke can'), Interruption())
+    assert alone.goals[0][0] == pytest.approx(can[0]), 'straight across when nothing is in the way'

@@ -153,7 +153,7 @@ class FakeWorld(Arm, Gripper, Perception):
     def names_available(self) -> bool:
         return True
 
-    def object_names(self) -> Future:
+    def object_names(self, visible_only: bool = True) -> Future:
         return done(list(self.objects)) if self.perception_answers else Future()
 
     def object_state(self, name: str) -> Future:
