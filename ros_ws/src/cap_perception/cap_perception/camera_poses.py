@@ -29,6 +29,11 @@ class CameraPoses:
             while len(self._poses) > self._keep:
                 self._poses.popitem(last=False)
 
+    def newest_stamp(self) -> int:
+        """The stamp [ns] of the newest pose kept, -1 when none is."""
+        with self._lock:
+            return max(self._poses, default=-1)
+
     def at(self, stamp_ns: int) -> np.ndarray | None:
         """The pose for the frame stamped `stamp_ns`: a moving camera's of that stamp, a fixed camera's latest;
         None when it has not come (yet)."""

@@ -45,6 +45,8 @@ def _nanoseconds(stamp) -> int:
 
 
 def _pose_matrix(position, orientation_xyzw) -> np.ndarray:
+    if not np.all(np.isfinite([*position, *orientation_xyzw])):
+        raise ValueError('a position or orientation value is not a finite number')
     pose = np.eye(4)
     pose[:3, :3] = Rotation.from_quat(orientation_xyzw).as_matrix()
     pose[:3, 3] = position
@@ -113,7 +115,12 @@ class PerceptionNode(Node):
 
     def _on_camera_pose(self, msg: PoseStamped) -> None:
         p, q = msg.pose.position, msg.pose.orientation
-        self._poses.add(_nanoseconds(msg.header.stamp), _pose_matrix([p.x, p.y, p.z], [q.x, q.y, q.z, q.w]))
+        try:
+            pose = _pose_matrix([p.x, p.y, p.z], [q.x, q.y, q.z, q.w])
+        except ValueError as error:  # a zero or non-finite quaternion: drop the message, keep serving
+            self.get_logger().error(f'ignoring a camera pose that is not a pose: {error}', throttle_duration_sec=5.0)
+            return
+        self._poses.add(_nanoseconds(msg.header.stamp), pose)
         self._offer_frame()  # a moving camera's frame may have come before its pose
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
@@ -136,6 +143,12 @@ class PerceptionNode(Node):
         pose = self._poses.at(_nanoseconds(color.header.stamp))
         if pose is not None:
             self._memory.offer((color, depth, pose), to_seconds(color.header.stamp), received_ns or None)
+        elif self._poses.newest_stamp() > _nanoseconds(color.header.stamp):
+            # Poses of later frames came but not this frame's: the poses carry other stamps than the images.
+            self.get_logger().warning(
+                f'no camera pose stamped as the frame at {to_seconds(color.header.stamp):.3f} s, but later ones; '
+                'a moving camera\'s frames are analysed with the pose of their own stamp only',
+                throttle_duration_sec=10.0)
 
     def _analyse(self, frame: tuple[Image, Image, np.ndarray]) -> list | None:
         """The objects in one colour and depth pair seen from `pose` (None when it cannot be analysed yet or at all).

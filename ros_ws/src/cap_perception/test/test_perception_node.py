@@ -121,6 +121,12 @@ def test_a_moving_cameras_frame_is_analysed_with_the_pose_stamped_as_the_frame(r
     publishers['depth'].publish(conv.depth_image_msg(2.0, robot.HEAD_CAMERA, depth))
     executor.spin_once(timeout_sec=0.5)
     assert _call(executor, spin_until, names, GetObjectNames.Request()).names == [], 'analysed without its pose'
+    broken = conv.pose_stamped_msg(2.0, world.camera_pose(robot.HEAD_CAMERA))
+    broken.pose.orientation.x = broken.pose.orientation.y = broken.pose.orientation.z = 0.0
+    broken.pose.orientation.w = 0.0
+    publishers['pose'].publish(broken)  # not a rotation: dropped with an error, the node serves on
+    executor.spin_once(timeout_sec=0.5)
+    assert _call(executor, spin_until, names, GetObjectNames.Request()).names == [], 'analysed with a broken pose'
 
     publishers['pose'].publish(conv.pose_stamped_msg(2.0, world.camera_pose(robot.HEAD_CAMERA)))
     assert spin_until(executor, lambda: _call(executor, spin_until, names, GetObjectNames.Request()).names
