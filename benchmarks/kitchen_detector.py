@@ -29,6 +29,8 @@ WIDTH, HEIGHT = 640, 480
 
 def _stats(values, scale: float = 1.0) -> dict:
     values = np.asarray(values, dtype=float) * scale
+    if not values.size:
+        return {'median': None, 'p90': None, 'max': None}
     return {'median': round(float(np.median(values)), 2), 'p90': round(float(np.percentile(values, 90)), 2),
             'max': round(float(values.max()), 2)}
 

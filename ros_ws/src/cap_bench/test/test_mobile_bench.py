@@ -77,7 +77,7 @@ def test_a_put_away_episode_names_a_bin_by_colour_and_teaches_its_use_first():
     for seed in range(20):
         episode = sample_episode('bin', seed)
         bin_name, label = episode.attributes['bin'], episode.attributes['label']
-        assert bin_name in layout.BIN_NAMES and label in layout.BIN_LABELS
+        assert bin_name in layout.BIN_NAMES and label in objects.BIN_LABEL_FOR_GROUP.values()
         assert episode.instructions == (f'go to the {bin_name}', f'this is the {label}',
                                         f'put the {episode.attributes["object"]} in the {label}')
         assert f'{label.replace(" ", "_")}_pos' in oracle_program(episode.instructions[1])
@@ -93,28 +93,35 @@ def test_no_prompt_holds_a_benchmark_instruction_or_a_demo_command():
 
 
 # ------------------------------------------------------------------------------------------- search
-def _run_search_program(program: str, seen_at: int | None) -> tuple[list, list]:
-    """Run a search's reference program with stand-in robot functions: the object comes into view at the
-    `seen_at`-th corner visited (None: never). Returns the poses driven to and the words said."""
+def _run_search_program(instruction: str, seen_at: int | None, folder) -> tuple[list, list]:
+    """Run a search's reference program the way lmp_node does (a cassette, the mobile engine, its sandbox) over
+    stand-in robot functions: the object comes into view at the `seen_at`-th corner visited (None: never). Returns
+    the poses driven to and the words said."""
+    from cap_lmp.cassette import ANY_CONTEXT, Cassette, CassetteClient, CassetteEntry
+    from cap_lmp_ros.domains.registry import get_domain
+
+    cassette = Cassette(folder / 'search.yaml', [CassetteEntry(
+        lmp='mobile_ui', query=instruction, context=ANY_CONTEXT, completion=oracle_program(instruction),
+        source='the benchmark\'s reference program')])
+    cassette.save()
     driven, said = [], []
-    scope = {'np': np, 'range': range,
-             'get_loc_pos': lambda name: np.array(layout.location(name).centre),
-             'goto_pos': lambda pos, angle: driven.append((*pos, angle)),
-             'is_obj_visible': lambda name: seen_at is not None and len(driven) == seen_at + 1,
-             'say': said.append}
-    exec(compile(program, '<search>', 'exec'), scope)  # the reference program, made here
+    functions = {'get_loc_pos': lambda name: np.array(layout.location(name).centre),
+                 'goto_pos': lambda pos, angle=None: driven.append((*pos, angle)),
+                 'is_obj_visible': lambda name: seen_at is not None and len(driven) == seen_at + 1,
+                 'say': said.append, 'get_loc_names': lambda: list(layout.LOCATION_NAMES)}
+    result = get_domain('mobile').build_engine(functions, CassetteClient(cassette.path)).run(instruction)
+    assert result.success, result.error
     return driven, said
 
 
-def test_the_search_program_goes_round_the_square_facing_its_centre_and_stops_when_it_sees_the_object():
+def test_the_search_program_goes_round_the_square_facing_its_centre_and_stops_when_it_sees_the_object(tmp_path):
     instruction = search_instruction('barstool', 1.5, 'banana')
     assert instruction == ('go in a 1.5m square around the barstool as many times as needed, check each step if '
                            'there is a banana, only stop moving when you see the banana')
-    program = oracle_program(instruction)
     poses = square_poses('barstool', 1.5)
-    driven, said = _run_search_program(program, seen_at=2)
+    driven, said = _run_search_program(instruction, 2, tmp_path)
     assert np.allclose(driven, poses[:3]) and said == ['I see the banana']
-    driven, said = _run_search_program(program, seen_at=None)
+    driven, said = _run_search_program(instruction, None, tmp_path)
     assert np.allclose(driven, np.vstack([poses] * SEARCH_LAPS))
     assert said == [f'I went around the barstool {SEARCH_LAPS} times and did not see the banana']
     assert "is_obj_visible('apple')" in oracle_program(search_instruction('office chair', 2.0, 'apple'))

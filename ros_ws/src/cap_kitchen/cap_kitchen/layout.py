@@ -66,7 +66,8 @@ FURNITURE: tuple[Furniture, ...] = (
     Furniture('chair', (1.6, -1.6), (0.45, 0.45, 0.9), '+y', kind='seat'),
     Furniture('barstool', (-2.6, 0.9), (0.4, 0.4, 0.76), '+x', round=True, kind='seat'),
     # The bins are named by their colour only: which one takes compost, recycling or landfill is what a user tells
-    # the robot ("this is the compost bin"), remembered in the session (BIN_LABELS are the words for it).
+    # the robot ("this is the compost bin"), remembered in the session (objects.BIN_LABEL_FOR_GROUP: which label
+    # takes what).
     Furniture('green bin', (-3.7, -0.6), (0.35, 0.35, 0.6), '+x', kind='bin'),
     Furniture('blue bin', (-3.7, -1.3), (0.35, 0.35, 0.6), '+x', kind='bin'),
     Furniture('grey bin', (-3.7, -2.0), (0.35, 0.35, 0.6), '+x', kind='bin'),
@@ -74,7 +75,6 @@ FURNITURE: tuple[Furniture, ...] = (
 FURNITURE_BY_NAME: dict[str, Furniture] = {piece.name: piece for piece in FURNITURE}
 LOCATION_NAMES: tuple[str, ...] = tuple(FURNITURE_BY_NAME)
 BIN_NAMES: tuple[str, ...] = tuple(piece.name for piece in FURNITURE if piece.kind == 'bin')
-BIN_LABELS: tuple[str, ...] = ('compost bin', 'recycle bin', 'landfill bin')
 
 def obstacle_footprints() -> list[tuple[float, float, float, float]]:
     """The floor the furniture stands on, as (x_min, y_min, x_max, y_max) boxes (the walls bound the room)."""

@@ -49,6 +49,9 @@ FRUIT_NAMES: tuple[str, ...] = ('apple', 'banana', 'orange')
 OBJECT_NAMES: tuple[str, ...] = tuple(KINDS) + FRUIT_NAMES
 GROUPS: dict[str, str] = {**{name: kind.group for name, kind in KINDS.items()},
                           **{name: GROUP_FRUIT for name in FRUIT_NAMES}}
+# What a user calls the bin each group is put away in (the bins themselves are named by colour: layout.BIN_NAMES).
+BIN_LABEL_FOR_GROUP: dict[str, str] = {GROUP_FRUIT: 'compost bin', GROUP_DRINK: 'recycle bin',
+                                       GROUP_SNACK: 'landfill bin'}
 
 SURFACES: tuple[str, ...] = ('table', 'countertop', 'desk')  # where objects stand at the start
 SPAWN_MARGIN = 0.1  # [m] inside a surface's edges

@@ -9,7 +9,7 @@ Templates (this project's; the paper reports no number for this domain):
 - fetch: "bring the coke can to the countertop" (it ends standing on that piece of furniture, within 5 cm of the
   spot the program chose: the furniture's centre);
 - bin: "go to the blue bin", "this is the compost bin", "put the apple in the compost bin" (the bins are named by
-  colour; which one is the compost bin is what the user says, a different one per episode, and the program must
+  colour; which one is the compost bin is what the user says, drawn per episode, and the program must
   remember it; the apple ends inside the blue bin);
 - count: "how many snacks are on the table?" (the last number said is the count the simulator has);
 - search: the paper's "go in a 1.5m square around the barstool as many times as needed, check each step if there is a
@@ -39,7 +39,6 @@ GOTO_PLACES = tuple(layout.LOCATION_NAMES)
 AROUND = ('office chair', 'chair', 'barstool')  # what rectangles go around
 SIDES = (1.5, 2.0, 2.5, 3.0)  # [m] a rectangle's sides
 PLACES_KEPT_FREE = 0.2  # [m] around a fetch's destination spot, no object at the start
-BINS_FOR = dict(zip((objects.GROUP_FRUIT, objects.GROUP_DRINK, objects.GROUP_SNACK), layout.BIN_LABELS))
 _GRID = NavigationConfig().grid()
 
 
@@ -161,7 +160,7 @@ def _try_episode(template: str, seed: int, rng: np.random.Generator) -> Episode 
         attributes.update(object=thing, destination=destination)
     elif template == 'bin':
         thing = str(rng.choice(objects.OBJECT_NAMES))
-        bin_name, label = str(rng.choice(layout.BIN_NAMES)), BINS_FOR[objects.GROUPS[thing]]
+        bin_name, label = str(rng.choice(layout.BIN_NAMES)), objects.BIN_LABEL_FOR_GROUP[objects.GROUPS[thing]]
         instructions = (f'go to the {bin_name}', f'this is the {label}', f'put the {thing} in the {label}')
         attributes.update(object=thing, bin=bin_name, label=label)
         scene = _scene(seed, rng, must_have=(thing,))

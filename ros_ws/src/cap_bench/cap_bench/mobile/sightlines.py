@@ -4,8 +4,9 @@
 The episode's objects are placed and settled as the graph's scene reset places them; for each pose the base's joints
 are set there for the ray test only (World.visible_with_base_at: nothing is driven, no time passes) and the answer is
 the ray test of the head camera that answers is_obj_visible in the graph. A driven base stops within the navigation
-node's goal tolerances of a pose, so a pose counts as showing an object only when every pose within them does, and as
-hiding it only when none does; in between the answer would depend on where the base happened to stop.
+node's goal tolerances of a pose, so a pose counts as showing an object only when the pose and the six poses at the
+ends of its tolerances (x, y and yaw, one at a time) all do, and as hiding it only when none of them does; in between
+the answer would depend on where the base happened to stop.
 """
 from __future__ import annotations
 
