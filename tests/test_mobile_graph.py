@@ -178,9 +178,16 @@ def rgbd(ros_context, tmp_path):
                "    x, y = get_obj_pos(name)\n"
                "    say(f'{name} at {x:.3f} {y:.3f}')\n"
                "say('that is all')")
-    cassette = Cassette(tmp_path / 'look.yaml', [CassetteEntry(
-        lmp='mobile_ui', query='what do you see on the table', context=ANY_CONTEXT, completion=program,
-        source='written by hand for the mobile graph test')])
+    pick_and_put_back = ("name = sorted(get_visible_obj_names())[0]\n"
+                         "start = get_obj_pos(name)\n"
+                         "pick_obj(name)\n"
+                         "place_at_pos(start)\n"
+                         "say(name)")
+    cassette = Cassette(tmp_path / 'look.yaml', [
+        CassetteEntry(lmp='mobile_ui', query='what do you see on the table', context=ANY_CONTEXT, completion=program,
+                      source='written by hand for the mobile graph test'),
+        CassetteEntry(lmp='mobile_ui', query='pick up the first thing you see and put it back', context=ANY_CONTEXT,
+                      completion=pick_and_put_back, source='written by hand for the mobile graph test')])
     yield from _graph_with(ros_context, cassette, seed=1, perception='rgbd', camera_rate=5.0)
 
 
@@ -204,3 +211,25 @@ def test_with_the_rgbd_detector_the_robot_sees_at_the_table_what_the_simulators_
     assert set(reported) == set(seen)
     for name, xy in reported.items():
         assert math.dist(xy, seen[name][:2]) < 0.02, name
+    # Picked where the detector placed it, lifted over the base, and put back where it was.
+    thing = sorted(reported)[0]
+    start, others = world.object_state(thing).position, {n: p for n, p in seen.items() if n != thing}
+    highest, done = [start[2]], threading.Event()
+
+    def watch() -> None:
+        while not done.is_set():
+            highest[0] = max(highest[0], world.object_state(thing).position[2])
+            time.sleep(0.05)
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    try:
+        result = _execute(user, 'pick up the first thing you see and put it back')
+    finally:
+        done.set()
+        watcher.join()
+    assert result.outcome == ExecuteCommand.Result.OUTCOME_DONE, result.message
+    assert highest[0] > start[2] + 0.2, f'the {thing} was not lifted'
+    assert math.dist(world.object_state(thing).position[:2], start[:2]) < 0.03
+    for name, position in others.items():
+        assert math.dist(world.object_state(name).position[:2], position[:2]) < 0.01, f'the {name} was moved'
