@@ -207,8 +207,13 @@ def plan_place(held: Held, spot: Sequence[float], world_spot: Sequence[float], j
     # Out of the carry pose in a straight line first (a joint move from there swings the upper arm through a tall
     # held object), then over the spot; a joint move that would dip more than TRAVEL_SAG below its end height (the
     # held object through a bin's wall or the furniture's edge) is a straight line instead.
-    out = planner.line((CARRY_OUT, 0.0, robot.CARRY_TCP[2]), yaw, 'out of the carry pose')
-    move = [out, planner.travel((x, y, above_z), yaw, f'above {description}', above_z - TRAVEL_SAG)]
+    # Out at the height above the spot when that is higher than the carry pose, risen over the base first: going out
+    # at the carry pose's height, a bottle held over a countertop's edge met it and turned in the fingers.
+    carry_x, carry_y, carry_z = robot.CARRY_TCP
+    out_z = max(carry_z, above_z)
+    rise = [planner.line((carry_x, carry_y, out_z), yaw, 'up over the base')] if out_z > carry_z else []
+    out = planner.line((CARRY_OUT, 0.0, out_z), yaw, 'out of the carry pose')
+    move = [*rise, out, planner.travel((x, y, above_z), yaw, f'above {description}', above_z - TRAVEL_SAG)]
     if drop_from is not None:
         place_steps = []
     else:  # down slowly until the held object touches
