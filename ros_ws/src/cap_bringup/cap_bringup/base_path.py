@@ -47,6 +47,12 @@ def round_visits(path: np.ndarray, corners: Sequence[Sequence[float]],
     return order, bool(order) and (turns <= {1} or turns <= {len(corners) - 1})
 
 
+def rectangle_corners(around: str, width: float, height: float) -> np.ndarray:
+    """The corners of a width x height rectangle around a location's centre, counterclockwise from its -x, -y one."""
+    centre = np.array(layout.location(around).centre)
+    return centre + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [width / 2, height / 2]
+
+
 def winding_turns(path: np.ndarray, point: Sequence[float]) -> float:
     """How many times the path went around `point` (signed, counterclockwise positive): its swept angle / 2 pi."""
     offsets = np.asarray(path)[:, :2] - np.asarray(point[:2], dtype=float)

@@ -39,12 +39,11 @@ Objects = list  # the simulator's object states when the command ended
 Check = Callable[[Path, list[str], Objects], str]  # (path, words said, objects) -> problem ('' when fine)
 
 CHAIR = np.array(layout.location('office chair').centre)
-RECTANGLE = CHAIR + np.array([[-1.5, -1.0], [1.5, -1.0], [1.5, 1.0], [-1.5, 1.0]])
+RECTANGLE = base_path.rectangle_corners('office chair', 3.0, 2.0)
 _TURN = np.radians(-45)
 TURNED_RECTANGLE = CHAIR + (RECTANGLE - CHAIR) @ np.array([[math.cos(_TURN), -math.sin(_TURN)],
                                                            [math.sin(_TURN), math.cos(_TURN)]]).T
-BARSTOOL_SQUARE = np.array(layout.location('barstool').centre) + np.array([[-0.75, -0.75], [0.75, -0.75],
-                                                                           [0.75, 0.75], [-0.75, 0.75]])
+BARSTOOL_SQUARE = base_path.rectangle_corners('barstool', 1.5, 1.5)
 
 
 def _reached(points: np.ndarray, what: str) -> Check:

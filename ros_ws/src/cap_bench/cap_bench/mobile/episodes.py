@@ -32,6 +32,7 @@ import numpy as np
 from cap_kitchen import layout, objects
 
 from cap_bench.mobile import sightlines
+from cap_bringup.base_path import rectangle_corners
 from cap_control.navigation_executor import NavigationConfig
 
 TEMPLATES = ('goto', 'rectangle', 'back_and_forth', 'fetch', 'bin', 'count', 'search')
@@ -175,11 +176,6 @@ def _try_episode(template: str, seed: int, rng: np.random.Generator) -> Episode 
     if scene is None:
         return None
     return Episode(template, seed, instructions, scene, attributes)
-
-
-def rectangle_corners(around: str, width: float, height: float) -> np.ndarray:
-    centre = np.array(layout.location(around).centre)
-    return centre + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [width / 2, height / 2]
 
 
 def _corner_rows(half_w: float, half_h: float) -> str:
