@@ -24,6 +24,7 @@ that time, which the watchdog excludes from the program's time, as the parent's 
 from __future__ import annotations
 
 import dataclasses
+import gc
 import importlib
 import itertools
 import os
@@ -235,10 +236,23 @@ def _build_engine(setup: dict[str, Any], channel: _Channel):
     return build_engine(api, _ParentModel(channel), limits, **dict(setup.get('engine_options') or {}))
 
 
+def freeze_setup_heap() -> None:
+    """Move every object alive now (modules, the engine, its prompts) out of the garbage collector's reach.
+
+    They live as long as the process, and a full collection walks every tracked object: about 5-7 ms for the
+    engine's 35,000, run on whichever thread allocates. Inside a controller's call that was more than its whole
+    time budget (5 ms at 100 Hz, counted in the thread's CPU time), so a collection falling into a call stopped
+    a correct controller. Frozen, a collection walks only what the programs made since.
+    """
+    gc.collect()
+    gc.freeze()
+
+
 def serve(connection: Connection, control: Connection) -> None:
     channel = _Channel(connection)
     setup = channel.receive()
     engine = _build_engine(setup, channel)
+    freeze_setup_heap()
     channel.on_invoke = _invoker(channel, engine)
     _limit_address_space(int(setup.get('address_space_extra_bytes', 0)))
     # The jail comes last of the setup (the engine's modules are loaded, the memory cap is set) and before the

@@ -2,6 +2,9 @@
 the sandbox process, under the sandbox's rules, with a time budget per call, from another thread of the node."""
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 import threading
 
 import pytest
@@ -110,3 +113,20 @@ def test_invoke_without_a_waiting_program_is_refused(driven):
     with pytest.raises(InvokeError) as raised:
         engine.invoke(CallableHandle(1, 'f'), [0], budget_s=0.01, timeout_s=0.1)
     assert raised.value.kind == 'NotRunning'
+
+
+def test_a_garbage_collection_in_the_sandbox_process_walks_only_what_programs_made():
+    # A full collection over the engine's own objects (5-7 ms) inside a controller's call stopped a correct
+    # controller at its 5 ms budget; the sandbox process freezes them once the engine is built.
+    script = (
+        'import gc, json\n'
+        'from cap_lmp.engine_process import freeze_setup_heap\n'
+        'from cap_lmp.testing.minimal_engine import build_engine\n'
+        'engine = build_engine({}, None)\n'
+        'before = len(gc.get_objects())\n'
+        'freeze_setup_heap()\n'
+        'made = [[i] for i in range(100)]\n'
+        'print(json.dumps([before, len(gc.get_objects())]))\n')
+    before, after = json.loads(subprocess.run([sys.executable, '-c', script], check=True, capture_output=True,
+                                              text=True).stdout)
+    assert before > 10_000 and 100 <= after < 1_000
