@@ -11,14 +11,16 @@ import pytest
 from action_msgs.msg import GoalStatus
 from cap_kitchen import layout
 from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import OccupancyGrid
 from rclpy.action import ActionClient
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Empty
 
+from cap_control import ros_conversions as conv
 from cap_control.navigation import wrap_angle
-from cap_control.navigation_node import NavigationNode
+from cap_control.navigation_node import MAP_QOS, NavigationNode
 from cap_interfaces.action import Navigate
 from cap_interfaces.msg import GraphNames
 from cap_sim_bridge.bridge_node import SimBridgeNode
@@ -41,7 +43,7 @@ def graph(ros_context, spin_until):
     for node in (bridge, navigation, client):
         executor.add_node(node)
     assert spin_until(executor, lambda: action.server_is_ready(), timeout=30.0)
-    yield executor, bridge.world, action, stop
+    yield executor, bridge.world, action, stop, client
     executor.shutdown()
     for node in (client, navigation, bridge):
         node.destroy_node()
@@ -71,7 +73,7 @@ def pose_goal(x: float, y: float, yaw: float) -> PoseStamped:
 
 
 def test_the_base_drives_to_a_named_place_within_5_cm_and_0_05_rad_with_feedback(graph, spin_until):
-    executor, world, action, _ = graph
+    executor, world, action, *_ = graph
     feedback = []
     response = finish(spin_until, executor, send(spin_until, executor, action, feedback, location_name='the table'))
     assert response.status == GoalStatus.STATUS_SUCCEEDED, response.result.error_msg
@@ -88,7 +90,7 @@ def test_the_base_drives_to_a_named_place_within_5_cm_and_0_05_rad_with_feedback
 
 
 def test_a_goal_inside_furniture_is_refused_as_unreachable_and_the_base_stays(graph, spin_until):
-    executor, world, action, _ = graph
+    executor, world, action, *_ = graph
     before = world.base_pose()
     table = layout.location('table')
     response = finish(spin_until, executor, send(spin_until, executor, action,
@@ -102,8 +104,19 @@ def test_a_goal_inside_furniture_is_refused_as_unreachable_and_the_base_stays(gr
     assert math.dist(world.base_pose()[:2], before[:2]) < 0.005
 
 
+def test_the_map_reaches_a_late_subscriber_with_the_table_where_the_base_cannot_stand(graph, spin_until):
+    executor, world, _, _, client = graph
+    maps = []
+    client.create_subscription(OccupancyGrid, GraphNames.NAVIGATION_MAP_TOPIC, maps.append, MAP_QOS)
+    assert spin_until(executor, lambda: maps, timeout=10.0)
+    grid = conv.occupancy_grid(maps[0])
+    table = layout.location('table')
+    assert not grid.is_free(table.centre) and grid.is_free(world.base_pose()[:2])
+    assert not grid.is_free((table.centre[0], table.footprint[1] - layout.BASE_RADIUS + 0.02)), 'inflated by the base'
+
+
 def test_stop_halts_the_base_within_half_a_second_of_simulated_time(graph, spin_until):
-    executor, world, action, stop = graph
+    executor, world, action, stop, _ = graph
     handle = send(spin_until, executor, action, location_name='desk')
     assert spin_until(executor, lambda: math.hypot(*world.base_velocity()[:2]) > 0.3, timeout=WAIT), \
         'the base never got going'

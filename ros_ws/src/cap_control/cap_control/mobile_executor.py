@@ -19,7 +19,7 @@ from cap_kitchen import layout, objects as kitchen_objects, robot
 from cap_control.mobile_manipulation import (
     MOBILE_CONFIG, Held, MobileErrorCode, object_in_arm_frame, plan_pick, plan_place, reach_pose, to_arm,
 )
-from cap_control.navigation_executor import NavigationConfig
+from cap_control.navigation import OccupancyGrid
 from cap_control.pick_place import PickPlaceConfig, PickPlaceError, StageName
 from cap_control.pick_place_executor import ExecutionConfig, PickPlaceOutcome, PlanRun
 from cap_control.ports import (
@@ -36,7 +36,11 @@ class Navigator(abc.ABC):
 
     @abc.abstractmethod
     def server_ready(self) -> Future:
-        """Completes once the navigation action can take goals."""
+        """Completes once the navigation action can take goals and its map has come."""
+
+    @abc.abstractmethod
+    def map(self) -> OccupancyGrid:
+        """The navigation node's own map: where the base's centre may stand (once server_ready completed)."""
 
     @abc.abstractmethod
     def go(self, pose: tuple[float, float, float]) -> PendingGoal:
@@ -59,11 +63,10 @@ class MobilePickPlaceExecutor:
 
     def __init__(self, arm: Arm, gripper: Gripper, perception: Perception, navigator: Navigator,
                  config: PickPlaceConfig = MOBILE_CONFIG, timeouts: ExecutionConfig = ExecutionConfig(),
-                 navigation: NavigationConfig = NavigationConfig(), stop_source: str = 'a stop request',
+                 stop_source: str = 'a stop request',
                  log: Callable[[str, str], None] | None = None) -> None:
         self.arm, self.gripper, self.perception, self.navigator = arm, gripper, perception, navigator
         self.config, self.timeouts = config, timeouts
-        self.grid = navigation.grid()
         self.stop_source = stop_source
         self.log = log or (lambda level, message: None)
         self.held: Held | None = None
@@ -101,7 +104,7 @@ class MobilePickPlaceExecutor:
         found = self._find(run, name, MobileErrorCode.OBJECT_NOT_FOUND)
         piece = self._surface(found.info.position, f'the {found.info.name}')
         keep_clear = self._others_on(run, piece, found.info.name)
-        self._drive(run, reach_pose(found.info.position, piece, self.grid, keep_clear=keep_clear), feedback)
+        self._drive(run, found.info.position, piece, keep_clear, feedback)
         seen = self._find(run, found.info.name, MobileErrorCode.OBJECT_NOT_FOUND)
         base = self._base_pose(run)
         plan, held = plan_pick(object_in_arm_frame(seen.info, base), seen.info, run.current_joints(), self.config)
@@ -129,7 +132,7 @@ class MobilePickPlaceExecutor:
             drop_from = piece.top - robot.ARM_MOUNT[2]
             what = f'the {piece.name}'
         keep_clear = self._others_on(run, piece, held.name)
-        self._drive(run, reach_pose(xy, piece, self.grid, keep_clear=keep_clear), feedback)
+        self._drive(run, xy, piece, keep_clear, feedback)
         base = self._base_pose(run)
         spot = to_arm((xy[0], xy[1], rest_z), base)
         plan = plan_place(held, spot, (xy[0], xy[1], rest_z), run.current_joints(), self.config, drop_from, what)
@@ -160,10 +163,13 @@ class MobilePickPlaceExecutor:
                                                             'the arm can work on')
         return layout.location(name)
 
-    def _drive(self, run: PlanRun, pose: tuple[float, float, float], feedback) -> None:
+    def _drive(self, run: PlanRun, xy: Sequence[float], piece: layout.Furniture,
+               keep_clear: Sequence[Sequence[float]], feedback) -> None:
+        """Bring the base where the arm reaches `xy` on `piece`: a spot free on the navigation node's own map (its
+        parameters decide the base's clearance, so a spot chosen here is one it accepts)."""
         feedback(STAGE_NAVIGATE, 0.0)
         run.available(self.navigator.server_ready(), self.navigator.server_description)
-        goal = self.navigator.go(pose)
+        goal = self.navigator.go(reach_pose(xy, piece, self.navigator.map(), keep_clear=keep_clear))
         run.send(goal, self.navigator.server_description, 'the navigation node refused the goal')
         code, message = run.answer(goal.result, DRIVE_TIMEOUT, self.navigator.server_description)
         run.active = None

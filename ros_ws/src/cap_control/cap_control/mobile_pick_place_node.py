@@ -7,15 +7,18 @@ at a point (on the furniture there, or into a bin) or on another object; feedbac
 arm's); a cancel of the goal or a message on the stop topic interrupts the run (the base and the arm hold where
 they are). What it shares with the other nodes that move the arm is cap_control.arm_node's; the gripper and
 perception ports are pick_place's. Parameters: ExecutionConfig (timeouts); where the base may stand is the
-navigation node's map at its defaults (NavigationConfig).
+navigation node's own map (/cap/control/navigation/map), so its parameters decide that here too; goals wait for it
+like for the navigation action.
 """
 from __future__ import annotations
 
+import threading
 from concurrent.futures import Future
 
 from cap_kitchen.robot import BASE_JOINT_NAMES
 from cap_ros_common.actions import RESULT_TIMEOUT_S, ActionClient
 from cap_ros_common.parameters import declare_config
+from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from rclpy.action import ActionServer
 
 from cap_control import ros_conversions as conv
@@ -23,6 +26,8 @@ from cap_control.arm_node import ActionGoal, ArmNode, ArmPort, spin_node
 from cap_control.mobile_executor import (
     TASK_PICK, TASK_PLACE_AT_OBJECT, TASK_PLACE_AT_POSITION, MobilePickPlaceExecutor, MobileRequest, Navigator,
 )
+from cap_control.navigation import OccupancyGrid
+from cap_control.navigation_node import MAP_QOS
 from cap_control.pick_place_executor import ExecutionConfig
 from cap_control.pick_place_node import GripperPort, PerceptionPort
 from cap_control.ports import PendingGoal
@@ -35,13 +40,17 @@ TASKS = {MobilePickPlace.Goal.TASK_PICK: TASK_PICK,
 
 
 class _NavigatorPort(Navigator):
-    server_description = f'the navigation action {GraphNames.NAVIGATE_ACTION}'
+    server_description = f'the navigation action {GraphNames.NAVIGATE_ACTION} and its map'
 
     def __init__(self, node: 'MobilePickPlaceNode'):
         self._node = node
 
     def server_ready(self) -> Future:
-        return self._node.when_ready(self._node.navigate_client.server_is_ready)
+        return self._node.when_ready(lambda: self._node.navigate_client.server_is_ready()
+                                     and self._node.navigation_map() is not None)
+
+    def map(self) -> OccupancyGrid:
+        return self._node.navigation_map()
 
     def go(self, pose: tuple[float, float, float]) -> PendingGoal:
         from cap_control.navigation_node import pose_msg
@@ -66,6 +75,10 @@ class MobilePickPlaceNode(ArmNode):
         self.gripper_client = ActionClient(self, GripperCommand, GraphNames.SIM_GRIPPER_ACTION,
                                            callback_group=self.callbacks)
         self.navigate_client = ActionClient(self, Navigate, GraphNames.NAVIGATE_ACTION, callback_group=self.callbacks)
+        self._map: OccupancyGrid | None = None
+        self._map_lock = threading.Lock()
+        self.create_subscription(OccupancyGridMsg, GraphNames.NAVIGATION_MAP_TOPIC, self._on_map, MAP_QOS,
+                                 callback_group=self.callbacks)
         self.executor_ = MobilePickPlaceExecutor(ArmPort(self), GripperPort(self), PerceptionPort(self),
                                                  _NavigatorPort(self), timeouts=self.timeouts,
                                                  stop_source=GraphNames.STOP_TOPIC, log=self._log)
@@ -80,6 +93,19 @@ class MobilePickPlaceNode(ArmNode):
                                                callback_group=self.callbacks)
         self.names_client = self.create_client(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE,
                                                callback_group=self.callbacks)
+
+    def _on_map(self, msg: OccupancyGridMsg) -> None:
+        try:
+            grid = conv.occupancy_grid(msg)
+        except ValueError as error:
+            self.get_logger().error(f'the navigation map was dropped: {error}')
+            return
+        with self._map_lock:
+            self._map = grid
+
+    def navigation_map(self) -> OccupancyGrid | None:
+        with self._map_lock:
+            return self._map
 
     def destroy_node(self) -> None:
         self._server.destroy()

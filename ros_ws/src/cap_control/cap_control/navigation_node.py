@@ -6,7 +6,9 @@ action, the base's joints in /joint_states) and serves the actions with it, one 
 names a location of the kitchen (location_name) or a pose in the map frame, a NavigateThroughPoses goal poses to
 reach in order; feedback carries the base's pose, the time since the goal began, the time and distance left, the
 recoveries made (and the poses left); a cancel of the goal or a message on the stop topic halts the base where it
-is (the goal ends CANCELED, aborted for a stop). Error codes are nav2's and this project's (UNKNOWN_LOCATION,
+is (the goal ends CANCELED, aborted for a stop). Its map (the furniture inflated by the base, where the base's
+centre may not stand) goes out once on /cap/control/navigation/map, so that other nodes choose spots it accepts.
+Error codes are nav2's and this project's (UNKNOWN_LOCATION,
 UNREACHABLE, CANCELLED). Parameters are declared from NavigationConfig, whose fields hold every default.
 """
 from __future__ import annotations
@@ -20,7 +22,9 @@ from cap_ros_common.actions import RESULT_TIMEOUT_S, ActionClient
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.time import duration_msg
 from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from rclpy.action import ActionServer
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from cap_control import ros_conversions as conv
@@ -37,6 +41,8 @@ from cap_interfaces.srv import GetBasePose
 # Poses are in the world frame (the URDF's root, as every cap-ros pose); goals may also name it "map", nav2's name.
 WORLD_FRAME = 'world'
 ACCEPTED_FRAMES = ('', 'world', 'map')
+# The map is sent once and never changes: kept for late subscribers, delivered for sure.
+MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class _BasePort(Base):
@@ -116,6 +122,9 @@ class NavigationNode(GoalNode):
                          result_timeout=RESULT_TIMEOUT_S, callback_group=self.callbacks)]
         self.create_service(GetBasePose, GraphNames.BASE_POSE_SERVICE, self._on_base_pose,
                             callback_group=self.callbacks)
+        self.map_publisher = self.create_publisher(OccupancyGridMsg, GraphNames.NAVIGATION_MAP_TOPIC, MAP_QOS)
+        self.map_publisher.publish(conv.occupancy_grid_msg(self.navigation.static_grid, WORLD_FRAME,
+                                                           self.get_clock().now().to_msg()))
         self.get_logger().info('navigation ready')
 
     def destroy_node(self) -> None:

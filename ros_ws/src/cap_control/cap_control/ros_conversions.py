@@ -5,7 +5,9 @@ from typing import Sequence
 
 import numpy as np
 from cap_ros_common.time import duration_msg, to_seconds
-from geometry_msgs.msg import Point
+from geometry_msgs.msg import Point, Pose
+from nav_msgs.msg import MapMetaData
+from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
 from trajectory_msgs.msg import JointTrajectoryPoint
@@ -15,6 +17,7 @@ from cap_interfaces.msg import JointTolerance
 from cap_interfaces.msg import ObjectState as ObjectStateMsg
 from cap_interfaces.srv import GetObjectState
 
+from cap_control.navigation import OccupancyGrid
 from cap_control.pick_place import ObjectInfo, yaw_of_quaternion
 from cap_control.ports import ArmOutcome, ArmResult, ObjectReport
 from cap_control.trajectory import JointTrajectory
@@ -97,3 +100,31 @@ def gripper_opening(msg: JointState) -> float | None:
 def point_msg(xyz: Sequence[float]) -> Point:
     return Point(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
 
+
+
+OCCUPIED, FREE = 100, 0  # nav_msgs/OccupancyGrid's cell values (-1 would be unknown: the map has none)
+
+
+def occupancy_grid_msg(grid: OccupancyGrid, frame_id: str, stamp) -> OccupancyGridMsg:
+    """The grid as nav_msgs/OccupancyGrid: row-major, the row along y, the column along x, as OccupancyGrid's."""
+    rows, columns = grid.occupied.shape
+    msg = OccupancyGridMsg(info=MapMetaData(map_load_time=stamp, resolution=float(grid.resolution), width=columns,
+                                            height=rows, origin=Pose(position=Point(x=float(grid.origin[0]),
+                                                                                    y=float(grid.origin[1])))))
+    msg.header.frame_id, msg.header.stamp = frame_id, stamp
+    msg.data = np.where(grid.occupied, OCCUPIED, FREE).astype(np.int8).ravel().tolist()
+    return msg
+
+
+def occupancy_grid(msg: OccupancyGridMsg) -> OccupancyGrid:
+    """The map back as an OccupancyGrid; unknown cells count as occupied. ValueError for a malformed map."""
+    info = msg.info
+    if info.width <= 0 or info.height <= 0 or len(msg.data) != info.width * info.height or \
+            not np.isfinite(info.resolution) or info.resolution <= 0:
+        raise ValueError(f'a map of {info.width} x {info.height} cells needs as many values, not {len(msg.data)}, '
+                         f'and a positive resolution, not {info.resolution:g}')
+    data = np.asarray(msg.data, dtype=np.int16).reshape(info.height, info.width)
+    # The message's resolution is a float32: 0.05 comes back as 0.0500000007, which would shift cell borders
+    # by a nanometre per cell. Maps are given in whole micrometres.
+    resolution = round(float(info.resolution), 6)
+    return OccupancyGrid((data != FREE), (float(info.origin.position.x), float(info.origin.position.y)), resolution)

@@ -11,6 +11,8 @@ from cap_control.mobile_executor import (
     TASK_PICK, TASK_PLACE_AT_OBJECT, TASK_PLACE_AT_POSITION, MobilePickPlaceExecutor, MobileRequest, Navigator,
 )
 from cap_control.mobile_manipulation import Held, MobileErrorCode
+from cap_control.navigation import OccupancyGrid
+from cap_control.navigation_executor import NavigationConfig
 from cap_control.pick_place import ObjectInfo
 from cap_control.ports import Arm, Ending, Gripper, Interruption, ObjectReport, PendingGoal, Perception
 
@@ -41,8 +43,9 @@ class Robot(Arm, Gripper, Perception, Navigator):
     """Every port at once: objects by name, a navigator that records its goals and fails when told to."""
 
     def __init__(self, objects: dict[str, tuple[float, float, float]], navigation_code: int = 0,
-                 out_of_view: tuple[str, ...] = ()):
+                 out_of_view: tuple[str, ...] = (), grid: OccupancyGrid | None = None):
         self.objects = objects
+        self.grid = grid if grid is not None else NavigationConfig().grid()  # the navigation node's map
         self.out_of_view = out_of_view  # remembered by perception, not seen now
         self.navigation_code = navigation_code
         self.goals: list[tuple[float, float, float]] = []
@@ -67,6 +70,9 @@ class Robot(Arm, Gripper, Perception, Navigator):
     # navigation
     def server_ready(self) -> Future:
         return done()
+
+    def map(self) -> OccupancyGrid:
+        return self.grid
 
     def go(self, pose) -> PendingGoal:
         self.goals.append(pose)
@@ -147,3 +153,16 @@ def test_the_base_stands_aside_of_an_object_in_the_arms_way_even_one_out_of_the_
     alone = Robot({'coke can': can}, navigation_code=9101)
     executor(alone).run(MobileRequest(TASK_PICK, 'coke can'), Interruption())
     assert alone.goals[0][0] == pytest.approx(can[0]), 'straight across when nothing is in the way'
+
+
+def test_where_the_base_may_stand_is_the_navigation_nodes_own_map():
+    """A navigation node told to keep 5 cm more clearance leaves no spot within the arm's reach of a can 15 cm into
+    the table: the pick is refused before the base moves, instead of a goal the node would refuse."""
+    usual = Robot({'coke can': ON_TABLE}, navigation_code=9101)
+    executor(usual).run(MobileRequest(TASK_PICK, 'coke can'), Interruption())
+    cautious_map = NavigationConfig(margin=layout.NAVIGATION_MARGIN + 0.05).grid()
+    cautious = Robot({'coke can': ON_TABLE}, grid=cautious_map)
+    outcome = executor(cautious).run(MobileRequest(TASK_PICK, 'coke can'), Interruption())
+    assert not cautious_map.is_free(usual.goals[0][:2])
+    assert outcome.code == MobileErrorCode.OUTSIDE_WORKSPACE and 'out of the arm\'s reach' in outcome.message
+    assert cautious.goals == []
