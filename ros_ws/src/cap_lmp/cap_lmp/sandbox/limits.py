@@ -21,4 +21,8 @@ class SandboxLimits:
     max_format_width: int = 10_000
     max_call_depth: int = 150
     max_memory_growth_bytes: int = 1 << 30
-    memory_check_interval_s: float = 0.005
+    # Reading the resident size releases the interpreter lock for a moment. At one read per 5 ms, CPython's switch
+    # interval, a thread waiting for the lock saw it change hands within each of its 5 ms waits, never asked the
+    # program to yield, and starved: the sandbox process's heartbeat and cancel threads went silent for seconds
+    # during a tight loop. Four switch intervals leave them their turn.
+    memory_check_interval_s: float = 0.02
