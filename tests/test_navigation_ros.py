@@ -10,6 +10,7 @@ import math
 import pytest
 from action_msgs.msg import GoalStatus
 from cap_kitchen import layout
+from cap_ros_common.qos import LATCHED_QOS
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid
 from rclpy.action import ActionClient
@@ -20,7 +21,7 @@ from std_msgs.msg import Empty
 
 from cap_control import ros_conversions as conv
 from cap_control.navigation import wrap_angle
-from cap_control.navigation_node import MAP_QOS, NavigationNode
+from cap_control.navigation_node import NavigationNode
 from cap_interfaces.action import Navigate
 from cap_interfaces.msg import GraphNames
 from cap_sim_bridge.bridge_node import SimBridgeNode
@@ -107,7 +108,7 @@ def test_a_goal_inside_furniture_is_refused_as_unreachable_and_the_base_stays(gr
 def test_the_map_reaches_a_late_subscriber_with_the_table_where_the_base_cannot_stand(graph, spin_until):
     executor, world, _, _, client = graph
     maps = []
-    client.create_subscription(OccupancyGrid, GraphNames.NAVIGATION_MAP_TOPIC, maps.append, MAP_QOS)
+    client.create_subscription(OccupancyGrid, GraphNames.NAVIGATION_MAP_TOPIC, maps.append, LATCHED_QOS)
     assert spin_until(executor, lambda: maps, timeout=10.0)
     grid = conv.occupancy_grid(maps[0])
     table = layout.location('table')

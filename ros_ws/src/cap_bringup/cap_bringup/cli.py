@@ -153,13 +153,13 @@ class _ReplyPath:
     """
 
     def __init__(self, node) -> None:
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from cap_ros_common.qos import LATCHED_QOS
 
         from cap_interfaces.msg import GraphNames, StatusEvent
 
         self.heard = False
-        qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self._subscription = node.create_subscription(StatusEvent, GraphNames.STATUS_TOPIC, self._on_status, qos)
+        self._subscription = node.create_subscription(StatusEvent, GraphNames.STATUS_TOPIC, self._on_status,
+                                                      LATCHED_QOS)
 
     def _on_status(self, _status) -> None:
         self.heard = True

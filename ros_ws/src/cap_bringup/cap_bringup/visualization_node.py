@@ -18,7 +18,6 @@ from typing import Any
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
@@ -27,11 +26,11 @@ from cap_interfaces.msg import GraphNames, StatusEvent
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 from cap_lmp_ros.lmp_node import EVENT_QOS
 from cap_ros_common.parameters import declare_config, parameter
+from cap_ros_common.qos import LATCHED_QOS
 from cap_sim_bridge.scenes import DEFAULT_SCENE, build_model
 from cap_sim_bridge.urdf import WORLD_LINK, robot_urdf
 from cap_tabletop.workspace import TABLE_X_RANGE, TABLE_Y_RANGE, TABLE_Z
 
-LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _FINAL = (StatusEvent.STAGE_DONE, StatusEvent.STAGE_ERROR, StatusEvent.STAGE_CANCELLED, StatusEvent.STAGE_REFUSED)
 
 

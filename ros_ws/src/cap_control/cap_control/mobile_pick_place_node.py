@@ -12,12 +12,12 @@ like for the navigation action.
 """
 from __future__ import annotations
 
-import threading
 from concurrent.futures import Future
 
 from cap_kitchen.robot import BASE_JOINT_NAMES
 from cap_ros_common.actions import RESULT_TIMEOUT_S, ActionClient
 from cap_ros_common.parameters import declare_config
+from cap_ros_common.qos import LATCHED_QOS
 from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from rclpy.action import ActionServer
 
@@ -27,7 +27,6 @@ from cap_control.mobile_executor import (
     TASK_PICK, TASK_PLACE_AT_OBJECT, TASK_PLACE_AT_POSITION, MobilePickPlaceExecutor, MobileRequest, Navigator,
 )
 from cap_control.navigation import OccupancyGrid
-from cap_control.navigation_node import MAP_QOS
 from cap_control.pick_place_executor import ExecutionConfig
 from cap_control.pick_place_node import GripperPort, PerceptionPort
 from cap_control.ports import PendingGoal
@@ -75,9 +74,8 @@ class MobilePickPlaceNode(ArmNode):
         self.gripper_client = ActionClient(self, GripperCommand, GraphNames.SIM_GRIPPER_ACTION,
                                            callback_group=self.callbacks)
         self.navigate_client = ActionClient(self, Navigate, GraphNames.NAVIGATE_ACTION, callback_group=self.callbacks)
-        self._map: OccupancyGrid | None = None
-        self._map_lock = threading.Lock()
-        self.create_subscription(OccupancyGridMsg, GraphNames.NAVIGATION_MAP_TOPIC, self._on_map, MAP_QOS,
+        self._map: OccupancyGrid | None = None  # replaced whole by the callback, read by goals' threads
+        self.create_subscription(OccupancyGridMsg, GraphNames.NAVIGATION_MAP_TOPIC, self._on_map, LATCHED_QOS,
                                  callback_group=self.callbacks)
         self.executor_ = MobilePickPlaceExecutor(ArmPort(self), GripperPort(self), PerceptionPort(self),
                                                  _NavigatorPort(self), timeouts=self.timeouts,
@@ -100,12 +98,10 @@ class MobilePickPlaceNode(ArmNode):
         except ValueError as error:
             self.get_logger().error(f'the navigation map was dropped: {error}')
             return
-        with self._map_lock:
-            self._map = grid
+        self._map = grid
 
     def navigation_map(self) -> OccupancyGrid | None:
-        with self._map_lock:
-            return self._map
+        return self._map
 
     def destroy_node(self) -> None:
         self._server.destroy()

@@ -20,11 +20,11 @@ import numpy as np
 from cap_kitchen.robot import BASE_JOINT_NAMES
 from cap_ros_common.actions import RESULT_TIMEOUT_S, ActionClient
 from cap_ros_common.parameters import declare_config
+from cap_ros_common.qos import LATCHED_QOS
 from cap_ros_common.time import duration_msg
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from rclpy.action import ActionServer
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from cap_control import ros_conversions as conv
@@ -41,8 +41,6 @@ from cap_interfaces.srv import GetBasePose
 # Poses are in the world frame (the URDF's root, as every cap-ros pose); goals may also name it "map", nav2's name.
 WORLD_FRAME = 'world'
 ACCEPTED_FRAMES = ('', 'world', 'map')
-# The map is sent once and never changes: kept for late subscribers, delivered for sure.
-MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class _BasePort(Base):
@@ -122,7 +120,8 @@ class NavigationNode(GoalNode):
                          result_timeout=RESULT_TIMEOUT_S, callback_group=self.callbacks)]
         self.create_service(GetBasePose, GraphNames.BASE_POSE_SERVICE, self._on_base_pose,
                             callback_group=self.callbacks)
-        self.map_publisher = self.create_publisher(OccupancyGridMsg, GraphNames.NAVIGATION_MAP_TOPIC, MAP_QOS)
+        self.map_publisher = self.create_publisher(OccupancyGridMsg, GraphNames.NAVIGATION_MAP_TOPIC,
+                                                   LATCHED_QOS)  # sent once, never changes
         self.map_publisher.publish(conv.occupancy_grid_msg(self.navigation.static_grid, WORLD_FRAME,
                                                            self.get_clock().now().to_msg()))
         self.get_logger().info('navigation ready')

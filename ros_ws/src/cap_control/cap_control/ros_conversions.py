@@ -101,7 +101,6 @@ def point_msg(xyz: Sequence[float]) -> Point:
     return Point(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
 
 
-
 OCCUPIED, FREE = 100, 0  # nav_msgs/OccupancyGrid's cell values (-1 would be unknown: the map has none)
 
 

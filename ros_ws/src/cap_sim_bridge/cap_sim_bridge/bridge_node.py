@@ -42,7 +42,7 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
@@ -53,6 +53,7 @@ from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import ControlStep, GetInk, PushTool, ResetScene
 from cap_ros_common.actions import RESULT_TIMEOUT_S
 from cap_ros_common.parameters import declare_config
+from cap_ros_common.qos import LATCHED_QOS
 from cap_ros_common.time import duration_msg, time_msg
 from cap_sim_bridge import ros_conversions as conv
 from cap_sim_bridge import trajectory_goal
@@ -65,7 +66,6 @@ from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES, TabletopW
 
 STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 IMAGE_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
-LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 GRIPPER_POSITION_TOLERANCE = 0.002  # [m] opening counted as reached
 GRIPPER_SETTLE_TIME = 0.1  # [s] of simulated time the fingers must be still before a gripper goal ends
