@@ -58,6 +58,29 @@ def ros_isolation(monkeypatch: pytest.MonkeyPatch) -> str:
 
 
 @pytest.fixture
+def install_plugin(tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Callable[..., pathlib.Path]]:
+    """install_plugin(modules, entry_points, name='test-plugin'): a package of this test, installed for this test only
+    (cap_ros_common.testing.write_distribution into a folder put first on sys.path; processes the test starts
+    inherit it through PYTHONPATH). Its modules are forgotten afterwards."""
+    import sys
+
+    from cap_ros_common.testing import write_distribution
+
+    folder = tmp_path / 'installed'
+    monkeypatch.setenv('PYTHONPATH', os.pathsep.join([str(folder), *filter(None, sys.path)]))
+
+    def install(modules, entry_points, name: str = 'test-plugin') -> pathlib.Path:
+        write_distribution(folder, name, modules, entry_points)
+        monkeypatch.syspath_prepend(str(folder))
+        return folder
+
+    yield install
+    for name, module in list(sys.modules.items()):
+        if str(getattr(module, '__file__', None) or '').startswith(str(folder)):
+            del sys.modules[name]
+
+
+@pytest.fixture
 def ros_context(ros_isolation: str) -> Iterator[object]:
     """An initialised rclpy context for this test only; nodes take it as `context=`."""
     import rclpy

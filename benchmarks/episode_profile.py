@@ -32,7 +32,7 @@ import tempfile
 
 # A stack counts for the first of these parts that any of its frames shows...
 SPECIFIC = (
-    ('physics', 'TabletopWorld.step'),
+    ('physics', 'World.step'),
     ('publishing', 'Publisher.publish'),
     ('publishing', '_joint_states'),
     ('planning', 'plan_pick_place'),

@@ -18,7 +18,7 @@ import random
 import time
 
 import numpy as np
-from cap_kitchen.layout import BASE_RADIUS, FURNITURE, ROOM_X_RANGE, ROOM_Y_RANGE
+from cap_mobile.layout import BASE_RADIUS, FURNITURE, ROOM_X_RANGE, ROOM_Y_RANGE
 
 from cap_control.navigation import (
     NavigationError, OccupancyGrid, PathFollower, follow_on_ideal_base, path_length, plan_path, wrap_angle,

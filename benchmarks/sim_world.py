@@ -26,9 +26,9 @@ os.environ.setdefault('MUJOCO_GL', 'egl')
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from cap_sim_bridge.scene import ObjectSpec  # noqa: E402
+from cap_sim_bridge.objects import ObjectSpec  # noqa: E402
 from cap_tabletop.palette import PALETTE as COLORS  # noqa: E402
-from cap_sim_bridge.world import HOME_JOINT_POSITIONS, TabletopWorld  # noqa: E402
+from cap_sim_bridge.world import HOME_JOINT_POSITIONS, World  # noqa: E402
 
 SIM_SECONDS = 10.0
 REPEATS = 5
@@ -58,7 +58,7 @@ def scene_10_and_10() -> list[ObjectSpec]:
     return specs
 
 
-def sweep(world: TabletopWorld) -> None:
+def sweep(world: World) -> None:
     """Command a back-and-forth arm motion over the table lasting longer than the measurement."""
     swing = np.array([0.5, 0.3, -0.3, 0.3, 0.3, 0.6])
     times = np.arange(1, 12) * 1.0
@@ -66,7 +66,7 @@ def sweep(world: TabletopWorld) -> None:
     world.follow_trajectory(times, positions)
 
 
-def physics_speed(world: TabletopWorld, specs: list[ObjectSpec], render_camera: str | None = None) -> dict:
+def physics_speed(world: World, specs: list[ObjectSpec], render_camera: str | None = None) -> dict:
     """Best of REPEATS runs from a fresh reset: the least disturbed by other processes on a shared machine."""
     runs = []
     for _ in range(REPEATS):
@@ -75,7 +75,7 @@ def physics_speed(world: TabletopWorld, specs: list[ObjectSpec], render_camera: 
     return max(runs, key=lambda run: run['real_time_factor'])
 
 
-def _timed_run(world: TabletopWorld, render_camera: str | None) -> dict:
+def _timed_run(world: World, render_camera: str | None) -> dict:
     sweep(world)
     steps = int(round(SIM_SECONDS / world.timestep))
     next_frame = world.time
@@ -93,7 +93,7 @@ def _timed_run(world: TabletopWorld, render_camera: str | None) -> dict:
             'wall_seconds': round(wall, 2), 'simulated_seconds': round(simulated, 2)}
 
 
-def render_ms(world: TabletopWorld, camera: str) -> dict:
+def render_ms(world: World, camera: str) -> dict:
     world.render(camera, WIDTH, HEIGHT)  # warm-up: creates the GL context and uploads the model
     rgb_only, rgbd = [], []
     for _ in range(RENDERS):
@@ -116,7 +116,7 @@ def main() -> None:
     results: dict = {'cores': len(os.sched_getaffinity(0)), 'timestep': None, 'image': f'{WIDTH}x{HEIGHT}',
                      'load_average_1min': round(os.getloadavg()[0], 2), 'scenes': {}}
     for name, specs in (('ur5e+4_blocks+4_bowls', scene_4_and_4()), ('ur5e+10_blocks+10_bowls', scene_10_and_10())):
-        world = TabletopWorld(seed=0, objects=specs)
+        world = World(seed=0, objects=specs)
         results['timestep'] = world.timestep
         world.render('front', WIDTH, HEIGHT)  # warm-up: the GL context and the model's upload are not measured
         scene_result = {'objects': len(specs), 'physics': physics_speed(world, specs)}

@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 from cap_bench.whiteboard import shapes  # noqa: E402
 from cap_bench.whiteboard.ink_check import check_drawing, distance_to_polylines  # noqa: E402
 from cap_control.path_following import PathConfig, StepKind, plan_path  # noqa: E402
-from cap_sim_bridge.world import TabletopWorld  # noqa: E402
+from cap_sim_bridge.world import World  # noqa: E402
 from cap_whiteboard import board, tool  # noqa: E402
 
 SHAPES = {
@@ -39,7 +39,7 @@ SPEEDS = (0.1, 0.2)
 STEPS_PER_CHUNK = 5  # the bridge steps 10 ms at a time
 
 
-def run(world: TabletopWorld, shape: np.ndarray, speed: float) -> dict:
+def run(world: World, shape: np.ndarray, speed: float) -> dict:
     world.reset(0, ['red block'])
     world.ink_canvas.clear()
     plan = plan_path(world.joint_positions(), [shape], tool.TOOL_MARKER, speed)
@@ -76,7 +76,7 @@ def run(world: TabletopWorld, shape: np.ndarray, speed: float) -> dict:
 def main() -> None:
     if hasattr(os, 'sched_setaffinity'):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-    world = TabletopWorld('whiteboard', seed=0, objects=['red block'])
+    world = World('whiteboard', seed=0, objects=['red block'])
     results = {f'{name}@{speed}m/s': run(world, shape, speed) for name, shape in SHAPES.items() for speed in SPEEDS}
     line = {speed: results[f'line_20cm@{speed}m/s'] for speed in SPEEDS}
     print(json.dumps({

@@ -31,10 +31,12 @@ step "fixing the ROS wheels' CMake exports"
 "$VENV/bin/python" scripts/fix_ros_wheels.py
 
 # Build inputs only: with --symlink-install, edits to Python modules need no rebuild, while manifests, setup files,
-# interface definitions, resources and config do.
+# interface definitions, resources and config do, and so does a module added or removed (setup.py files offer the
+# modules of their plug-in folders as entry points): the list of module paths counts, not their contents.
 src_hash=$( (find ros_ws/src -type f \( -name package.xml -o -name setup.py -o -name setup.cfg -o -name CMakeLists.txt \
     -o -name '*.msg' -o -name '*.srv' -o -name '*.action' -o -path '*/resource/*' -o -path '*/config/*' \
-    -o -path '*/launch/*' \) -print0 | sort -z | xargs -0 sha1sum; echo "$req_hash") | sha1sum | cut -d' ' -f1)
+    -o -path '*/launch/*' \) -print0 | sort -z | xargs -0 sha1sum; find ros_ws/src -name '*.py' | sort;
+    echo "$req_hash") | sha1sum | cut -d' ' -f1)
 if [ "$(cat ros_ws/install/.cap-source 2>/dev/null)" != "$src_hash" ]; then
   step "building ros_ws with colcon"
   (

@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 import rclpy
-from cap_kitchen import layout, objects
+from cap_mobile import layout, objects
 from rclpy.action import ActionClient
 from std_msgs.msg import String
 

@@ -9,7 +9,7 @@ import math
 
 import pytest
 from action_msgs.msg import GoalStatus
-from cap_kitchen import layout
+from cap_mobile import layout
 from cap_ros_common.qos import LATCHED_QOS
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid
@@ -34,7 +34,7 @@ Result = Navigate.Result
 def graph(ros_context, spin_until):
     context = ros_context
     bridge = SimBridgeNode(context=context, parameter_overrides=[
-        Parameter('scene', value='kitchen'), Parameter('camera_rate', value=0.0),
+        Parameter('scene', value='mobile'), Parameter('camera_rate', value=0.0),
         Parameter('real_time', value=True), Parameter('real_time_factor', value=2.0)])
     navigation = NavigationNode(context=context, parameter_overrides=[Parameter('use_sim_time', value=True)])
     client = Node('navigation_test_client', context=context)

@@ -1,8 +1,8 @@
 """Another package plugs a domain and a scene in through entry points, found in any process that asks for them.
 
-The test writes a tiny installed distribution (a module plus its dist-info with entry_points.txt) into a folder,
-puts the folder on PYTHONPATH of a fresh interpreter, and asks the registries there: nothing of the project is
-edited or imported by the plug-in's name.
+The test writes a tiny installed distribution (a module plus its dist-info with entry_points.txt,
+cap_ros_common.testing.write_distribution) into a folder, puts the folder on PYTHONPATH of a fresh interpreter, and
+asks the registries there: nothing of the project is edited or imported by the plug-in's name.
 """
 from __future__ import annotations
 
@@ -11,6 +11,8 @@ import os
 import subprocess
 import sys
 import textwrap
+
+from cap_ros_common.testing import write_distribution
 
 PLUGIN = textwrap.dedent('''
     """A domain and a scene offered by another package."""
@@ -21,18 +23,13 @@ PLUGIN = textwrap.dedent('''
     from cap_sim_bridge import scenes
 
     DOMAIN = Domain(name='greenhouse', build_engine=toy_domain.build_engine, robot_functions=('ring_bell',),
-                    robot_api=toy_domain.RosToyApi, scene='greenhouse bench', cassette=Path('greenhouse.yaml'))
-    SCENE = scenes.SceneSpec('greenhouse bench', build=scenes.mjcf_builder(
+                    robot_api=toy_domain.RosToyApi, scene='greenhouse', cassette=Path('greenhouse.yaml'))
+    SCENE = scenes.SceneSpec('greenhouse', build=scenes.mjcf_builder(
         '<mujoco><include file="ur5e_gripper.xml"/><worldbody>'
         '<geom name="table" type="box" size="0.3 0.3 0.02" pos="0 -0.5 -0.02"/></worldbody></mujoco>'))
 ''')
-ENTRY_POINTS = textwrap.dedent('''
-    [cap_ros.domains]
-    greenhouse = greenhouse_plugin:DOMAIN
-
-    [cap_ros.scenes]
-    greenhouse bench = greenhouse_plugin:SCENE
-''')
+ENTRY_POINTS = {'cap_ros.domains': {'greenhouse': 'greenhouse_plugin:DOMAIN'},
+                'cap_ros.scenes': {'greenhouse': 'greenhouse_plugin:SCENE'}}
 PROBE = textwrap.dedent('''
     import json
     from cap_lmp_ros.domains.registry import domain_names, get_domain
@@ -44,16 +41,12 @@ PROBE = textwrap.dedent('''
 
 
 def test_a_domain_and_a_scene_of_another_package_are_found_through_entry_points(tmp_path):
-    (tmp_path / 'greenhouse_plugin.py').write_text(PLUGIN)
-    info = tmp_path / 'greenhouse_plugin-0.1.dist-info'
-    info.mkdir()
-    (info / 'METADATA').write_text('Metadata-Version: 2.1\nName: greenhouse-plugin\nVersion: 0.1\n')
-    (info / 'entry_points.txt').write_text(ENTRY_POINTS)
+    write_distribution(tmp_path, 'greenhouse-plugin', {'greenhouse_plugin': PLUGIN}, ENTRY_POINTS)
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path)] + sys.path))
     answer = subprocess.run([sys.executable, '-c', PROBE], env=environment, capture_output=True, text=True,
                             timeout=120, cwd=tmp_path)
     assert answer.returncode == 0, answer.stderr
     found = json.loads(answer.stdout.strip().splitlines()[-1])
     assert {'greenhouse', 'tabletop'} <= set(found['domains'])
-    assert {'greenhouse bench', 'tabletop'} <= set(found['scenes'])
-    assert found['scene_of_domain'] == found['scene_found'] == 'greenhouse bench'
+    assert {'greenhouse', 'tabletop'} <= set(found['scenes'])
+    assert found['scene_of_domain'] == found['scene_found'] == 'greenhouse'

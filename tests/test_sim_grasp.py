@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from cap_control.kinematics import HOME_JOINTS, forward_kinematics, inverse_kinematics, top_down_pose
-from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge.objects import ObjectSpec
 from cap_tabletop.objects import BOWL_BOTTOM_THICKNESS, BOWL_INNER_RADIUS
-from cap_sim_bridge.world import GRIPPER_MAX_OPENING, TabletopWorld
+from cap_sim_bridge.world import GRIPPER_MAX_OPENING, World
 
 LIFT = 0.10
 
@@ -31,7 +31,7 @@ def move_tcp(world, target, duration, waypoints=10):
 @pytest.mark.parametrize('block_xy, bowl_xy', [((0.0, -0.5), (0.15, -0.6)), ((-0.15, -0.35), (0.1, -0.65)),
                                                ((0.18, -0.68), (-0.15, -0.4))])
 def test_grasp_lift_and_drop_into_a_bowl(block_xy, bowl_xy):
-    world = TabletopWorld(objects=[ObjectSpec('red block', 'block', 'red', block_xy),
+    world = World(objects=[ObjectSpec('red block', 'block', 'red', block_xy),
                                    ObjectSpec('blue bowl', 'bowl', 'blue', bowl_xy)])
     # Nothing but contacts can carry the block: the only equality constraint couples the two fingers.
     assert world.model.neq == 1

@@ -15,7 +15,8 @@ setup(
     zip_safe=False,
     maintainer='cap-ros maintainers',
     maintainer_email='maintainers@cap-ros.dev',
-    description='ROS helpers of the cap-ros nodes: parameters declared from a config dataclass, time conversions.',
+    description=('Small helpers shared by the cap-ros packages: parameters declared from a config dataclass, time '
+                 'conversions, QoS, action clients, plug-ins by entry point.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

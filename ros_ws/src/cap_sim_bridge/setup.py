@@ -1,8 +1,11 @@
 from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
 package_name = 'cap_sim_bridge'
+# Every module of scenes/ is a domain's scene: offered by its file name, so none is forgotten in a list.
+SCENES = sorted(path.stem for path in Path(package_name, 'scenes').glob('*.py') if not path.stem.startswith('_'))
 
 setup(
     name=package_name,
@@ -20,7 +23,7 @@ setup(
     zip_safe=True,
     maintainer='cap-ros maintainers',
     maintainer_email='maintainers@cap-ros.dev',
-    description='MuJoCo simulation of the cap-ros robots (UR5e table-top) and its ROS 2 bridge node.',
+    description='MuJoCo simulation of the cap-ros robots (a scene per domain) and its ROS 2 bridge node.',
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={
@@ -28,9 +31,7 @@ setup(
             'sim_bridge = cap_sim_bridge.bridge_node:main',
             'cap_sim_render = cap_sim_bridge.render_cli:main',
         ],
-        # Scenes found by the scene registry in every process (cap_sim_bridge.scenes).
-        'cap_ros.scenes': [
-            'controllers = cap_sim_bridge.controller_scene:SCENE',
-        ],
+        # The scenes the bridge's `scene` parameter names (cap_sim_bridge.scenes).
+        'cap_ros.scenes': [f'{name} = {package_name}.scenes.{name}:SCENE' for name in SCENES],
     },
 )

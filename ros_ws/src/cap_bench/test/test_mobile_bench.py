@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from cap_kitchen import layout, objects
+from cap_mobile import layout, objects
 
 from cap_bench.mobile.bench import judge
 from cap_bench.mobile.episodes import (SEARCH_LAPS, TEMPLATES, Episode, oracle_program, rectangle_corners,
@@ -160,12 +160,12 @@ def test_the_search_judge_wants_the_corners_in_turn_and_a_stop_at_the_first_that
 
 @pytest.mark.slow
 def test_a_search_episode_hides_its_object_at_the_start_and_shows_it_from_a_corner_of_a_square_on_free_floor():
-    from cap_sim_bridge.scene import ObjectSpec
-    from cap_sim_bridge.world import TabletopWorld
+    from cap_sim_bridge.objects import ObjectSpec
+    from cap_sim_bridge.world import World
 
     from cap_control.navigation_executor import NavigationConfig
 
-    grid, world = NavigationConfig().grid(), TabletopWorld('kitchen')
+    grid, world = NavigationConfig().grid(), World('mobile')
     for seed in range(10):
         episode = sample_episode('search', seed)
         a = episode.attributes

@@ -11,7 +11,7 @@ import pathlib
 from typing import Sequence
 
 import numpy as np
-from cap_kitchen import layout
+from cap_mobile import layout
 
 REACHED = 0.05  # [m] a point counts as reached when the base's centre came this close
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from cap_kitchen import layout, objects as kitchen_objects, robot
+from cap_mobile import layout, objects as mobile_objects, robot
 
 from cap_bringup import base_path
 from cap_bringup.demo import VideoRecorder, _call, _wait
@@ -82,8 +82,8 @@ def _said_distance_to(name: str) -> Check:
 
 def _counted_on(group: str, surface: str) -> Check:
     def check(path: Path, said: list[str], objects: Objects) -> str:
-        truth = sum(1 for state in objects if kitchen_objects.GROUPS.get(state.name) == group
-                    and kitchen_objects.surface_of(*state.position[:2]) == surface)
+        truth = sum(1 for state in objects if mobile_objects.GROUPS.get(state.name) == group
+                    and mobile_objects.surface_of(*state.position[:2]) == surface)
         numbers = [int(n) for text in said for n in re.findall(r'\b\d+\b', text)]
         return '' if numbers[-1:] == [truth] else f'said {said}, but there are {truth} {group}s on the {surface}'
     return check
@@ -113,8 +113,8 @@ def _in_bin(name: str, bin_name: str) -> Check:
 
 
 def _fruit_centre(objects: Objects) -> np.ndarray:
-    fruit = [np.array(s.position) for s in objects if kitchen_objects.GROUPS.get(s.name) == kitchen_objects.GROUP_FRUIT
-             and kitchen_objects.surface_of(*s.position[:2]) == 'table']
+    fruit = [np.array(s.position) for s in objects if mobile_objects.GROUPS.get(s.name) == mobile_objects.GROUP_FRUIT
+             and mobile_objects.surface_of(*s.position[:2]) == 'table']
     return np.mean(fruit, axis=0)
 
 
@@ -154,7 +154,7 @@ STEPS = (
     Step('move back and forth between the table and the countertop 3 times',
          (_back_and_forth('table', 'countertop', 3),)),
     Step('how far are you from the desk', (_said_distance_to('desk'),)),
-    Step('how many snacks are on the table?', (_counted_on(kitchen_objects.GROUP_SNACK, 'table'),)),
+    Step('how many snacks are on the table?', (_counted_on(mobile_objects.GROUP_SNACK, 'table'),)),
     Step('take the water bottle from the desk and put it in the middle of the fruits on the table',
          (_near('water bottle', _fruit_centre, 0.05, 'the middle of the fruits'),)),
     # The bins are named by colour; the user says which is which, and the session remembers it.

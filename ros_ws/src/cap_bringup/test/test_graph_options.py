@@ -1,6 +1,6 @@
 """What GraphOptions asks of the nodes for the chosen perception (no graph is brought up here)."""
 import pytest
-from cap_kitchen import robot
+from cap_mobile import robot
 
 from cap_bringup.graph import GraphOptions
 from cap_perception.config import PerceptionConfig
@@ -14,7 +14,7 @@ def _perception(**options) -> dict:
 
 def test_rgbd_perception_of_the_mobile_domain_runs_the_kitchens_detector_on_the_moving_head_camera():
     parameters = _perception(domain='mobile', perception='rgbd')
-    assert parameters == {'source': 'rgbd', 'detector': 'kitchen', 'camera': robot.HEAD_CAMERA,
+    assert parameters == {'source': 'rgbd', 'detector': 'mobile', 'camera': robot.HEAD_CAMERA,
                           'camera_moves': True}
     PerceptionConfig(**parameters).validate()
     assert _perception(domain='mobile') == {'source': 'ground_truth'}

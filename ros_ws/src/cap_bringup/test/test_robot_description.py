@@ -8,7 +8,7 @@ import xml.etree.ElementTree as ElementTree
 import mujoco
 import numpy as np
 import pytest
-from cap_kitchen.robot import BASE_JOINT_NAMES
+from cap_mobile.robot import BASE_JOINT_NAMES
 
 from cap_control.kinematics import forward_kinematics
 from cap_sim_bridge.scenes import build_model
@@ -73,7 +73,7 @@ def test_the_urdf_chain_is_the_dh_chain_of_the_ur5e(urdf, seed):
 @pytest.mark.parametrize('seed', range(3))
 def test_the_mobile_manipulators_urdf_moves_its_flange_where_the_simulator_does(seed):
     """The kitchen's base joints (x, y and a yaw about the base's centre, off the arm's root frame) as a chain."""
-    model = build_model([], 'kitchen')
+    model = build_model([], 'mobile')
     urdf = ElementTree.fromstring(robot_urdf(model))
     rng = np.random.default_rng(seed)
     positions = dict(zip(BASE_JOINT_NAMES, [*rng.uniform(-2, 2, 2), rng.uniform(-math.pi, math.pi)]))

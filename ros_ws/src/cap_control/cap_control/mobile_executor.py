@@ -14,7 +14,7 @@ from concurrent.futures import Future
 from typing import Callable, Sequence
 
 import numpy as np
-from cap_kitchen import layout, objects as kitchen_objects, robot
+from cap_mobile import layout, objects as mobile_objects, robot
 
 from cap_control.mobile_manipulation import (
     MOBILE_CONFIG, Held, MobileErrorCode, object_in_arm_frame, plan_pick, plan_place, reach_pose, to_arm,
@@ -125,7 +125,7 @@ class MobilePickPlaceExecutor:
             xy, rest_z, what = target.info.position[:2], target.info.top, f'the {target.info.name}'
         else:
             xy = tuple(float(v) for v in request.target_xy)
-            rest_z, what = kitchen_objects.surface_height(*xy), f'({xy[0]:.2f}, {xy[1]:.2f})'
+            rest_z, what = mobile_objects.surface_height(*xy), f'({xy[0]:.2f}, {xy[1]:.2f})'
         piece = self._surface(xy, what)
         drop_from = None
         if piece.kind == 'bin':  # let it fall in from above the rim: the arm does not reach down into a bin
@@ -153,11 +153,11 @@ class MobilePickPlaceExecutor:
     def _others_on(run: PlanRun, piece: layout.Furniture, exclude: str) -> list[tuple[float, float]]:
         """Where the other objects perception knows of stand on `piece`: the arm keeps its path clear of them."""
         return [report.info.position[:2] for report in run.other_objects(exclude) or ()
-                if kitchen_objects.surface_of(*report.info.position[:2]) == piece.name]
+                if mobile_objects.surface_of(*report.info.position[:2]) == piece.name]
 
     @staticmethod
     def _surface(xy: Sequence[float], what: str) -> layout.Furniture:
-        name = kitchen_objects.surface_of(float(xy[0]), float(xy[1]))
+        name = mobile_objects.surface_of(float(xy[0]), float(xy[1]))
         if name is None:
             raise Failed(MobileErrorCode.OUTSIDE_WORKSPACE, f'{what} is on the floor, not on a piece of furniture '
                                                             'the arm can work on')

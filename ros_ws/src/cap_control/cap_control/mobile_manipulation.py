@@ -1,12 +1,12 @@
 """Picking and placing from the mobile base (plain Python, no ROS): where the base stands to reach an object or a
 spot on a piece of furniture, and the arm's stages planned in the arm's own frame.
 
-The arm's frame is the UR5e's base frame on the mobile base (cap_kitchen.robot.ARM_MOUNT): the kinematics and the
+The arm's frame is the UR5e's base frame on the mobile base (cap_mobile.robot.ARM_MOUNT): the kinematics and the
 table top's planning helpers (cap_control.pick_place) work in it unchanged; the checks of a plan (grasp width, the
 object lifted, where it ended) stay in the world frame, where perception reports. The base stands at one of the
 furniture's four sides, facing it, across from the object (`reach_pose`): the side whose spot is free for the base
 and nearest the object within the arm's reach. A pick grasps top-down across the object's narrower side and ends in
-the carry pose (the tool over the base, cap_kitchen.robot.CARRY_TCP, the object hanging above the base's top); a
+the carry pose (the tool over the base, cap_mobile.robot.CARRY_TCP, the object hanging above the base's top); a
 place goes over the spot, down until the held object touches (or, over a bin, lets it drop in from above the rim),
 opens and stows the arm again.
 """
@@ -18,7 +18,7 @@ import math
 from typing import Sequence
 
 import numpy as np
-from cap_kitchen import layout, robot
+from cap_mobile import layout, robot
 
 from cap_control.navigation import OccupancyGrid, wrap_angle
 from cap_control.pick_place import (

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from concurrent.futures import Future
 
-from cap_kitchen.robot import BASE_JOINT_NAMES
+from cap_mobile.robot import BASE_JOINT_NAMES
 from cap_ros_common.actions import RESULT_TIMEOUT_S, ActionClient
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.qos import LATCHED_QOS

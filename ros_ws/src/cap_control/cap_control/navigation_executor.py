@@ -19,7 +19,7 @@ from concurrent.futures import Future
 from typing import Callable
 
 import numpy as np
-from cap_kitchen import layout
+from cap_mobile import layout
 from cap_ros_common.parameters import parameter
 
 from cap_control.navigation import (

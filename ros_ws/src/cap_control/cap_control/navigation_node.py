@@ -17,7 +17,7 @@ import math
 from concurrent.futures import Future
 
 import numpy as np
-from cap_kitchen.robot import BASE_JOINT_NAMES
+from cap_mobile.robot import BASE_JOINT_NAMES
 from cap_ros_common.actions import RESULT_TIMEOUT_S, ActionClient
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.qos import LATCHED_QOS

@@ -12,14 +12,14 @@ from cap_control.control_loop import (ControlLoop, ControllerFailure, Outcome, P
                                       make_run)
 from cap_controllers import plants
 from cap_controllers.plants import ArmState
-from cap_sim_bridge import controller_scene, scenes
-from cap_sim_bridge.world import TabletopWorld
+from cap_sim_bridge.scenes import controllers as controller_scene
+from cap_sim_bridge.world import World
 
 
 class WorldPlant:
     """The loop's Plant port on the world itself, stepping in lockstep as the bridge does."""
 
-    def __init__(self, world: TabletopWorld, spec: plants.PlantSpec) -> None:
+    def __init__(self, world: World, spec: plants.PlantSpec) -> None:
         self.world, self.spec = world, spec
         self.released = False
         self.started = False
@@ -62,8 +62,7 @@ def pd_balance(state):
 
 @pytest.fixture(scope='module')
 def world():
-    scenes.register_scene(controller_scene.SCENE, replace=True)
-    world = TabletopWorld(controller_scene.NAME, seed=1)
+    world = World(controller_scene.NAME, seed=1)
     yield world
     world.close()
 

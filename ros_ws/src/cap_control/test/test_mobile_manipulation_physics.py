@@ -7,7 +7,7 @@ import pathlib
 import sys
 
 import pytest
-from cap_kitchen import layout, objects, robot
+from cap_mobile import layout, objects, robot
 
 from cap_control.mobile_manipulation import (
     MobileErrorCode, object_in_arm_frame, plan_pick, plan_place, reach_pose, to_arm,
@@ -15,8 +15,8 @@ from cap_control.mobile_manipulation import (
 from cap_control.navigation import PathFollower, base_trajectory, follow_on_ideal_base, plan_path, wrap_angle
 from cap_control.navigation_executor import NavigationConfig
 from cap_control.pick_place import PickPlaceErrorCode, PickPlaceError
-from cap_sim_bridge.scene import ObjectSpec
-from cap_sim_bridge.world import TabletopWorld
+from cap_sim_bridge.objects import ObjectSpec
+from cap_sim_bridge.world import World
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))  # world_plan_runner beside this file
 from world_plan_runner import execute, object_info  # noqa: E402
 
@@ -24,7 +24,7 @@ CONFIG = NavigationConfig()
 GRID = CONFIG.grid()
 
 
-def drive(world: TabletopWorld, goal) -> None:
+def drive(world: World, goal) -> None:
     """The base to `goal` as the navigation node drives it (no obstacles the map lacks here)."""
     pose = world.base_pose()
     path = plan_path(GRID, pose, goal)
@@ -35,7 +35,7 @@ def drive(world: TabletopWorld, goal) -> None:
     world.run_for(end - world.time + 0.3)
 
 
-def pick(world: TabletopWorld, name: str):
+def pick(world: World, name: str):
     obj = object_info(world, name)
     piece = layout.location(objects.surface_of(*obj.position[:2]))
     others = [state.position[:2] for state in world.object_states() if state.name != name]
@@ -48,7 +48,7 @@ def pick(world: TabletopWorld, name: str):
 
 @pytest.fixture(scope='module')
 def world():
-    return TabletopWorld('kitchen', seed=0)
+    return World('mobile', seed=0)
 
 
 @pytest.mark.parametrize('name', objects.OBJECT_NAMES)

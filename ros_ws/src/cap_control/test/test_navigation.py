@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from cap_kitchen.layout import BASE_RADIUS, FURNITURE, ROOM_X_RANGE, ROOM_Y_RANGE, START_POSE, location
+from cap_mobile.layout import BASE_RADIUS, FURNITURE, ROOM_X_RANGE, ROOM_Y_RANGE, START_POSE, location
 
 from cap_control.navigation import (
     FollowerLimits, NavigateErrorCode, NavigationError, OccupancyGrid, PathFollower, follow_on_ideal_base,

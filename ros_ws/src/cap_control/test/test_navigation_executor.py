@@ -7,7 +7,7 @@ from concurrent.futures import Future
 
 import numpy as np
 import pytest
-from cap_kitchen import layout
+from cap_mobile import layout
 
 from cap_control.navigation import NavigateErrorCode
 from cap_control.navigation_executor import Base, NavigateRequest, NavigationConfig, NavigationExecutor

@@ -13,15 +13,15 @@ import pytest
 from cap_control.pick_place import (
     ObjectInfo, Observation, PickPlaceErrorCode, StageName, TrajectoryStep, plan_pick_place,
 )
-from cap_sim_bridge.scene import ObjectSpec
-from cap_sim_bridge.world import TabletopWorld
+from cap_sim_bridge.objects import ObjectSpec
+from cap_sim_bridge.world import World
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))  # world_plan_runner beside this file
 from world_plan_runner import execute, object_info, run_gripper, run_trajectory  # noqa: E402
 
 @pytest.fixture
 def world():
-    return TabletopWorld(objects=[
+    return World(objects=[
         ObjectSpec('red block', 'block', 'red', (0.12, -0.62)),
         ObjectSpec('green block', 'block', 'green', (-0.15, -0.4)),
         ObjectSpec('yellow block', 'block', 'yellow', (0.15, -0.35)),
@@ -117,7 +117,7 @@ def test_after_clearing_the_cameras_view_near_the_base_the_next_pick_still_succe
     # low across the table and knocked the next block away from the fingers.
     from cap_control.pick_place import PickPlaceConfig
 
-    world = TabletopWorld(objects=[ObjectSpec('brown block', 'block', 'brown', (0.15, -0.6)),
+    world = World(objects=[ObjectSpec('brown block', 'block', 'brown', (0.15, -0.6)),
                                    ObjectSpec('cyan block', 'block', 'cyan', (0.006, -0.377))])
     config = PickPlaceConfig(clear_view_from=(0.0, -0.5, 0.85))
     for name, target in (('brown block', corner), ('cyan block', (0.25, -0.75))):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
-from cap_kitchen import layout
+from cap_mobile import layout
 
 from cap_control import ros_conversions as conv
 from cap_control.navigation_executor import NavigationConfig

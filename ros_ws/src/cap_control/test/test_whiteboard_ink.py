@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from cap_control.path_following import plan_path
-from cap_sim_bridge.world import TabletopWorld
+from cap_sim_bridge.world import World
 from cap_whiteboard import board
 
 
@@ -18,7 +18,7 @@ def _follow(world, plan):
 
 @pytest.fixture(scope='module')
 def world():
-    return TabletopWorld('whiteboard', seed=0, objects=['red block'])
+    return World('whiteboard', seed=0, objects=['red block'])
 
 
 def test_the_ink_is_where_the_tip_touched_the_board_not_where_it_was_sent(world):

@@ -1,5 +1,6 @@
 """The domain registry: the table-top domain is found by its folder, an unknown domain is a one-line error, and a
-domain registered from elsewhere (the toy domain) runs through lmp_node over DDS, its robot API really called."""
+domain another package offers (the toy domain, installed by the test) runs through lmp_node over DDS, its robot API
+really called."""
 from __future__ import annotations
 
 import dataclasses
@@ -13,7 +14,7 @@ from std_msgs.msg import String
 
 from cap_interfaces.action import ExecuteCommand
 from cap_interfaces.msg import StatusEvent
-from cap_lmp_ros.domains.registry import domain_names, get_domain, register_domain, unregister_domain
+from cap_lmp_ros.domains.registry import ENTRY_POINT_GROUP, domain_names, get_domain
 from cap_lmp_ros.lmp_node import LmpNode
 from cap_lmp_ros.testing.lmp_graph import LmpGraph, wait_for
 from cap_lmp_ros.testing.toy_domain import BELL_TOPIC, toy_domain
@@ -33,11 +34,11 @@ def test_the_table_top_domain_is_found_by_its_folder():
 
 def test_an_unknown_domain_is_a_one_line_error_naming_the_known_ones(ros_context):
     with pytest.raises(ValueError) as error:
-        get_domain('kitchen')
-    assert "unknown domain 'kitchen'" in str(error.value) and 'tabletop' in str(error.value)
+        get_domain('spaceship')
+    assert "unknown domain 'spaceship'" in str(error.value) and 'tabletop' in str(error.value)
     assert '\n' not in str(error.value)
-    with pytest.raises(ValueError, match="unknown domain 'kitchen'.*tabletop"):
-        LmpNode(context=ros_context, parameter_overrides=[Parameter('domain', value='kitchen')])
+    with pytest.raises(ValueError, match="unknown domain 'spaceship'.*tabletop"):
+        LmpNode(context=ros_context, parameter_overrides=[Parameter('domain', value='spaceship')])
 
 
 def test_what_the_sandbox_process_imports_has_no_rclpy():
@@ -54,22 +55,30 @@ def test_a_domain_builder_must_be_found_by_name_in_the_sandbox_process(tmp_path)
         dataclasses.replace(toy, build_engine=lambda api, client, limits, **options: None)
 
 
-def test_a_second_domain_of_the_same_name_is_refused(tmp_path):
-    register_domain(toy_domain(tmp_path / 'a.yaml', name='toy_twice'))
-    try:
-        with pytest.raises(ValueError, match='registered already'):
-            register_domain(toy_domain(tmp_path / 'b.yaml', name='toy_twice'))
-    finally:
-        unregister_domain('toy_twice')
+def _toy_module(cassette, name: str = 'toy') -> str:
+    """A module of another package that defines the toy domain as DOMAIN."""
+    return ('from pathlib import Path\nfrom cap_lmp_ros.testing.toy_domain import toy_domain\n'
+            f'DOMAIN = toy_domain(Path({str(cassette)!r}), name={name!r})\n')
+
+
+def test_a_second_domain_of_the_same_name_is_refused(install_plugin, tmp_path):
+    install_plugin({'toy_a': _toy_module(tmp_path / 'a.yaml', 'toy_twice')},
+                   {ENTRY_POINT_GROUP: {'toy_twice': 'toy_a:DOMAIN'}}, name='toy-a')
+    assert get_domain('toy_twice').cassette == tmp_path / 'a.yaml'
+    install_plugin({'toy_b': _toy_module(tmp_path / 'b.yaml', 'toy_twice')},
+                   {ENTRY_POINT_GROUP: {'toy_twice': 'toy_b:DOMAIN'}}, name='toy-b')
+    with pytest.raises(ValueError, match="domain 'toy_twice' is offered twice, by toy_a:DOMAIN .* and toy_b:DOMAIN"):
+        get_domain('toy_twice')
 
 
 @pytest.fixture
-def toy_graph(ros_context, tmp_path):
+def toy_graph(ros_context, tmp_path, install_plugin):
     cassette = tmp_path / 'toy.yaml'
     entries = [{'lmp': 'toy_ui', 'query': query, 'context': '*', 'completion': code, 'source': 'written by hand'}
                for query, code in TOY_PROGRAMS.items()]
     cassette.write_text(yaml.safe_dump({'format': CASSETTE_FORMAT, 'entries': entries}))
-    register_domain(toy_domain(cassette), replace=True)  # its cassette is the default: no parameter names it
+    # Its cassette is the default: no parameter names it.
+    install_plugin({'toy_plugin': _toy_module(cassette)}, {ENTRY_POINT_GROUP: {'toy': 'toy_plugin:DOMAIN'}})
     graph = LmpGraph(ros_context, tmp_path, [Parameter('domain', value='toy'), Parameter('time_limit_s', value=30.0)])
     bells: list[str] = []
     graph.user.create_subscription(String, BELL_TOPIC, lambda message: bells.append(message.data), 10)
@@ -77,7 +86,6 @@ def toy_graph(ros_context, tmp_path):
     assert wait_for(lambda: graph.user.count_publishers(BELL_TOPIC) == 1)
     yield graph
     graph.close()
-    unregister_domain('toy')
 
 
 def test_a_registered_toy_domain_runs_through_lmp_node(toy_graph):

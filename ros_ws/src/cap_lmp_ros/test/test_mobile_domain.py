@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from cap_kitchen import layout
+from cap_mobile import layout
 
 from cap_lmp.cassette import CassetteClient
 from cap_lmp.errors import RobotApiError

@@ -6,8 +6,9 @@ import dataclasses
 from cap_ros_common.parameters import parameter
 from cap_tabletop.cameras import CAMERAS, DEFAULT_CAMERA, optical_orientation_xyzw
 
+from cap_perception.detectors import detector_names
+
 SOURCES = ('ground_truth', 'rgbd', 'stub')
-DETECTORS = ('tabletop', 'kitchen')  # cap_perception.rgbd_detector, cap_perception.kitchen_detector
 
 
 @dataclasses.dataclass(frozen=True)
@@ -16,10 +17,10 @@ class PerceptionConfig:
                                             '(colour detector on camera images) or stub (YAML file).')
     stub_file: str = parameter('', 'YAML file of objects for source=stub.')
     # For source=rgbd. The defaults are the table top's detector and the simulated camera it reads.
-    detector: str = parameter('tabletop', 'What the rgbd source finds: tabletop (the blocks and bowls on the table, '
-                                          'best from the top camera) or kitchen (the kitchen\'s objects on its '
-                                          'furniture, from the mobile base\'s head camera: camera head, '
-                                          'camera_moves true).')
+    detector: str = parameter('tabletop', 'Which domain\'s detector the rgbd source runs (cap_perception.detectors): '
+                                          'tabletop (the blocks and bowls on the table, best from the top camera), '
+                                          'mobile (the kitchen\'s objects on its furniture, from the mobile base\'s '
+                                          'head camera: camera head, camera_moves true), or another package\'s.')
     camera: str = parameter(DEFAULT_CAMERA, 'Camera whose images the detector reads '
                                             '(topics <camera namespace>/<camera>/{color,depth,camera_info,pose}).')
     camera_pose_from_topic: bool = parameter(True, 'Take the camera pose from the latched <camera>/pose topic (the '
@@ -42,8 +43,8 @@ class PerceptionConfig:
             raise ValueError(f'parameter source={self.source!r} is not one of {", ".join(SOURCES)}')
         if self.source == 'stub' and not self.stub_file:
             raise ValueError('parameter stub_file is required when source=stub')
-        if self.detector not in DETECTORS:
-            raise ValueError(f'parameter detector={self.detector!r} is not one of {", ".join(DETECTORS)}')
+        if self.detector not in (known := detector_names()):
+            raise ValueError(f'parameter detector={self.detector!r} is not one of {", ".join(known)}')
         if self.camera_moves and not self.camera_pose_from_topic:
             raise ValueError('a moving camera (camera_moves) needs camera_pose_from_topic: its pose comes with '
                              'each frame')

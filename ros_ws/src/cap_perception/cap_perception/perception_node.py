@@ -2,7 +2,7 @@
 
 The `source` parameter chooses where objects come from: `ground_truth` (the simulator's object array), `rgbd` (a
 colour detector on one camera's colour and depth images, run on the newest frame when a service is asked: the table
-top's or the kitchen's, the `detector` parameter) or `stub` (a YAML file).
+domain's, the `detector` parameter: cap_perception.detectors) or `stub` (a YAML file).
 """
 from __future__ import annotations
 
@@ -25,8 +25,8 @@ from cap_ros_common.parameters import declare_config
 from cap_ros_common.time import time_msg, to_seconds
 from cap_perception.camera_poses import CameraPoses
 from cap_perception.config import PerceptionConfig
-from cap_perception.kitchen_detector import detect_kitchen
-from cap_perception.rgbd_detector import CameraView, detect, same_view
+from cap_perception.detectors import get_detector
+from cap_perception.rgbd import CameraView, same_view
 from cap_perception.ros_conversions import from_msg, image_to_array, to_msg
 from cap_perception.sources import (CameraMemory, NoObservationError, SnapshotSource, UnknownObjectError,
                                     load_stub_objects)
@@ -37,7 +37,6 @@ OBJECTS_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=R
 # queued behind it need theirs: keep several.
 POSE_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
-_DETECT = {'tabletop': detect, 'kitchen': detect_kitchen}  # per value of the `detector` parameter (config.DETECTORS)
 
 
 def _nanoseconds(stamp) -> int:
@@ -87,7 +86,7 @@ class PerceptionNode(Node):
     def _start_detector(self) -> None:
         config = self.config
         camera, use_pose_topic = config.camera, config.camera_pose_from_topic
-        self._detect = _DETECT[config.detector]
+        self._detect = get_detector(config.detector)
         self._poses = CameraPoses(moving=config.camera_moves)
         if not use_pose_topic:
             self._poses.add(0, _pose_matrix(config.camera_position, config.camera_orientation))

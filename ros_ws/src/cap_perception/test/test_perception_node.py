@@ -86,14 +86,14 @@ def test_a_moving_cameras_frame_is_analysed_with_the_pose_stamped_as_the_frame(r
     images, and is never analysed with the latest pose of another moment (here: where the base started)."""
     import math
 
-    from cap_kitchen import layout, robot
+    from cap_mobile import layout, robot
     from cap_sim_bridge import ros_conversions as conv
     from cap_sim_bridge.bridge_node import IMAGE_QOS, LATCHED_QOS
-    from cap_sim_bridge.world import TabletopWorld
+    from cap_sim_bridge.world import World
     from geometry_msgs.msg import PoseStamped
     from sensor_msgs.msg import CameraInfo, Image
 
-    world = TabletopWorld('kitchen', seed=1)
+    world = World('mobile', seed=1)
     start_pose = world.camera_pose(robot.HEAD_CAMERA)
     end = world.follow_base_trajectory([8.0], [list(layout.location('table').approach())])  # a straight drive
     world.run_for(end - world.time + 0.5)
@@ -103,7 +103,7 @@ def test_a_moving_cameras_frame_is_analysed_with_the_pose_stamped_as_the_frame(r
 
     add, executor = graph
     add(PerceptionNode(context=ros_context, parameter_overrides=[
-        Parameter('source', value='rgbd'), Parameter('detector', value='kitchen'),
+        Parameter('source', value='rgbd'), Parameter('detector', value='mobile'),
         Parameter('camera', value=robot.HEAD_CAMERA), Parameter('camera_moves', value=True)]))
     camera = add(Node('head_camera', context=ros_context))
     prefix = f'{GraphNames.CAMERA_NAMESPACE}/{robot.HEAD_CAMERA}'

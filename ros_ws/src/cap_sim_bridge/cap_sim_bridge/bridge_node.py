@@ -62,7 +62,7 @@ from cap_sim_bridge.rest import RestWatch
 from cap_sim_bridge.config import SimBridgeConfig, cameras_to_publish
 from cap_sim_bridge.lockstep import Lockstep
 from cap_sim_bridge.mobile_base import BASE_JOINT_NAMES
-from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES, TabletopWorld
+from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES, World
 
 STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 IMAGE_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
@@ -118,7 +118,7 @@ class SimBridgeNode(Node):
 
         names = [n for n in (part.strip() for part in config.objects.split(',')) if n]
         # Names, not specs: the world reads them once its scene (and the object kinds the scene brings) is loaded.
-        self.world = TabletopWorld(scene_name, seed, names or None)
+        self.world = World(scene_name, seed, names or None)
         self._cameras = cameras_to_publish(config.cameras, self.world.scene.camera_names, self.world.camera_names)
 
         self._clock_pub = self.create_publisher(Clock, GraphNames.CLOCK_TOPIC, STATE_QOS)

@@ -19,13 +19,13 @@ from typing import Sequence
 import numpy as np
 
 from cap_sim_bridge.pacing import Pacer
-from cap_sim_bridge.world import TabletopWorld
+from cap_sim_bridge.world import World
 
 MAX_STEP_DURATION = 1.0  # [s] of simulated time in one request
 
 
 class Lockstep:
-    def __init__(self, world: TabletopWorld, real_time_factor: float, timeout_s: float) -> None:
+    def __init__(self, world: World, real_time_factor: float, timeout_s: float) -> None:
         self.world = world
         self.timeout_s = timeout_s
         self._pacer = Pacer(real_time_factor)

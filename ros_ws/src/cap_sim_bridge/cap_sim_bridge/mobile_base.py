@@ -11,7 +11,7 @@ from typing import Sequence
 
 import mujoco
 import numpy as np
-from cap_kitchen.robot import BASE_JOINT_NAMES
+from cap_mobile.robot import BASE_JOINT_NAMES
 
 from cap_sim_bridge.trajectory import JointTrajectory
 

@@ -18,8 +18,8 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from cap_sim_bridge.rendering import QUALITIES  # noqa: E402
-from cap_sim_bridge.scene import ObjectSpec  # noqa: E402
-from cap_sim_bridge.world import TabletopWorld
+from cap_sim_bridge.objects import ObjectSpec  # noqa: E402
+from cap_sim_bridge.world import World
 from cap_tabletop.cameras import CAMERA_NAMES  # noqa: E402
 
 
@@ -36,7 +36,7 @@ def render_scene(out_dir: pathlib.Path, seed: int, objects: Sequence[str] | None
                  with_depth: bool = False, quality: str = 'pretty') -> list[pathlib.Path]:
     """Reset the world to (seed, objects), render every camera and write PNGs; returns the files written."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    world = TabletopWorld(seed=seed, objects=[ObjectSpec.from_name(n) for n in objects] if objects else None)
+    world = World(seed=seed, objects=[ObjectSpec.from_name(n) for n in objects] if objects else None)
     written = []
     try:
         for camera in cameras:

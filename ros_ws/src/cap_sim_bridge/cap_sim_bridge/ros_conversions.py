@@ -13,7 +13,7 @@ from cap_interfaces.msg import ObjectSpec as ObjectSpecMsg
 from cap_interfaces.msg import ObjectState as ObjectStateMsg
 from cap_ros_common.time import time_msg
 from cap_sim_bridge.camera import CameraIntrinsics
-from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge.objects import ObjectSpec
 from cap_sim_bridge.world import ObjectState
 
 WORLD_FRAME = 'world'

@@ -3,7 +3,7 @@ blocks and bowls; see cap_sim_bridge.scenes). No ROS here.
 
 Typical use::
 
-    world = TabletopWorld()
+    world = World()
     objects = world.reset(seed=3)                       # list[ObjectState] after the objects settled
     world.follow_trajectory([1.0, 2.0], [q_mid, q_goal])  # times from now [s], arm joint positions [rad]
     world.run_for(2.5)                                  # advance simulated time
@@ -30,11 +30,11 @@ import numpy as np
 from cap_tabletop.workspace import REST_JOINTS
 
 from cap_sim_bridge import camera as camera_math
-from cap_sim_bridge import scene, scenes
+from cap_sim_bridge import objects as scene_objects, scenes
 from cap_sim_bridge.ink import InkCanvas, InkSurface
 from cap_sim_bridge.mobile_base import MobileBase
 from cap_sim_bridge.rendering import RgbdRenderer
-from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge.objects import ObjectSpec
 from cap_sim_bridge.trajectory import JointTrajectory
 
 ARM_JOINT_NAMES = ('shoulder_pan_joint', 'shoulder_lift_joint', 'elbow_joint', 'wrist_1_joint', 'wrist_2_joint',
@@ -93,7 +93,7 @@ class _Push:
     end_time: float  # [s] simulated
 
 
-class TabletopWorld:
+class World:
     """The table-top simulation. See the module docstring for the threading rule."""
 
     def __init__(self, scene_name: str = scenes.DEFAULT_SCENE, seed: int = 0,
@@ -162,7 +162,7 @@ class TabletopWorld:
                 x, y = position[:2]
                 surface = position[2] if len(position) > 2 else self.scene.surface_z
                 adr = self._object_qpos_adr[spec.name]
-                z = surface + scene.resting_height(spec.category) + scene.SPAWN_CLEARANCE
+                z = surface + scene_objects.resting_height(spec.category) + scene_objects.SPAWN_CLEARANCE
                 self.data.qpos[adr:adr + 7] = [x, y, z, 1.0, 0.0, 0.0, 0.0]
             if self.scene.initialize is not None:  # the scene's own seeded start (e.g. a cart-pole's lean)
                 self.scene.initialize(self.model, self.data, seed)
@@ -658,7 +658,7 @@ class TabletopWorld:
         low, high = np.min(lows, axis=0), np.max(highs, axis=0)
         w, x, y, z = data.xquat[self._object_body_ids[spec.name]]
         return ObjectState(name=spec.name, category=spec.category, color_name=spec.color_name,
-                           rgba=scene.rgba(spec.color_name), position=tuple(float(v) for v in (low + high) / 2),
+                           rgba=scene_objects.rgba(spec.color_name), position=tuple(float(v) for v in (low + high) / 2),
                            orientation_xyzw=(float(x), float(y), float(z), float(w)),
                            bbox_min=tuple(float(v) for v in low), bbox_max=tuple(float(v) for v in high))
 

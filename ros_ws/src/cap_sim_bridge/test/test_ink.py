@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from cap_sim_bridge.ink import InkCanvas
-from cap_sim_bridge.whiteboard_scene import INK
+from cap_sim_bridge.scenes.whiteboard import INK
 
 
 def test_a_stroke_is_the_tips_width_with_round_ends():

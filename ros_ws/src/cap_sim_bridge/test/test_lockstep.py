@@ -8,15 +8,14 @@ import numpy as np
 import pytest
 
 from cap_controllers import plants
-from cap_sim_bridge import controller_scene, scenes
+from cap_sim_bridge.scenes import controllers as controller_scene
 from cap_sim_bridge.lockstep import Lockstep
-from cap_sim_bridge.world import TabletopWorld
+from cap_sim_bridge.world import World
 
 
 @pytest.fixture(scope='module')
 def world():
-    scenes.register_scene(controller_scene.SCENE, replace=True)
-    world = TabletopWorld(controller_scene.NAME, seed=4)
+    world = World(controller_scene.NAME, seed=4)
     yield world
     world.close()
 

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge.objects import ObjectSpec
 from cap_tabletop.palette import PALETTE as COLORS
-from cap_sim_bridge.world import TabletopWorld
+from cap_sim_bridge.world import World
 from cap_tabletop.cameras import CAMERA_NAMES
 
 BLOCKS = [ObjectSpec('red block', 'block', 'red', (-0.15, -0.35)),
@@ -22,7 +22,7 @@ def nearest_palette_colour(rgb):
 
 @pytest.fixture(scope='module')
 def world():
-    world = TabletopWorld(objects=BLOCKS)
+    world = World(objects=BLOCKS)
     yield world
     world.close()
 

@@ -4,9 +4,9 @@ import math
 import numpy as np
 import pytest
 
-from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge.objects import ObjectSpec
 from cap_sim_bridge.trajectory import JointTrajectory
-from cap_sim_bridge.world import GRIPPER_MAX_OPENING, HOME_JOINT_POSITIONS, TCP_OFFSET, TabletopWorld
+from cap_sim_bridge.world import GRIPPER_MAX_OPENING, HOME_JOINT_POSITIONS, TCP_OFFSET, World
 
 UR5E_DH = [(0.0, 0.1625, math.pi / 2), (-0.425, 0.0, 0.0), (-0.3922, 0.0, 0.0), (0.0, 0.1333, math.pi / 2),
            (0.0, 0.0997, -math.pi / 2), (0.0, 0.0996, 0.0)]
@@ -38,7 +38,7 @@ def reachable_goals(count, seed=0):
 
 @pytest.fixture(scope='module')
 def world():
-    return TabletopWorld(objects=['red block', 'blue bowl'])
+    return World(objects=['red block', 'blue bowl'])
 
 
 @pytest.mark.parametrize('with_velocities', [False, True])

@@ -6,10 +6,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from cap_sim_bridge import scene
-from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge import objects as scene
+from cap_sim_bridge.objects import ObjectSpec
 from cap_tabletop import palette, workspace
-from cap_sim_bridge.world import ARM_JOINT_NAMES, TCP_OFFSET, TabletopWorld
+from cap_sim_bridge.world import ARM_JOINT_NAMES, TCP_OFFSET, World
 
 # Settled objects may drift a little from their sampled spot while contacts come to rest.
 DRIFT = 0.003
@@ -32,7 +32,7 @@ def dh_forward_kinematics(q):
 
 @pytest.fixture(scope='module')
 def world():
-    return TabletopWorld()
+    return World()
 
 
 def test_200_seeds_spawn_by_the_rules_and_settle_on_the_table(world):

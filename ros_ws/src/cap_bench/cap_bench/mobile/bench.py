@@ -28,7 +28,7 @@ from typing import Sequence
 
 import numpy as np
 import yaml
-from cap_kitchen import layout, objects
+from cap_mobile import layout, objects
 
 from cap_bench.episode_runs import EPISODES, lmp_parameters, load_records, run_episodes
 from cap_bench.mobile.episodes import (TEMPLATES, Episode, oracle_program, rectangle_corners, sample_episode,

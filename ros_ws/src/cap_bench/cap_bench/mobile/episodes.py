@@ -17,7 +17,7 @@ Templates (this project's; the paper reports no number for this domain):
   side of SIDES, any object of the scene the head camera sees from a corner of the square, facing the location's
   centre, and not from the start pose: decided on a headless simulator, cap_bench.mobile.sightlines; the base must
   go round the corners in order and stop at the first one from which the object is seen, and see it there).
-Every episode stands six or seven objects on the table, the countertop and the desk (cap_kitchen.objects); a
+Every episode stands six or seven objects on the table, the countertop and the desk (cap_mobile.objects); a
 fetch's object starts on another piece of furniture than its destination, whose centre is kept free.
 
 A reference program depends only on its instruction's words (one cassette serves every episode).
@@ -29,7 +29,7 @@ import math
 import re
 
 import numpy as np
-from cap_kitchen import layout, objects
+from cap_mobile import layout, objects
 
 from cap_bench.mobile import sightlines
 from cap_bringup.base_path import rectangle_corners

@@ -21,8 +21,8 @@ _CONFIG = NavigationConfig()
 @functools.lru_cache(maxsize=1)
 def _world():
     """One headless kitchen per process (building it takes about half a second; a reset, milliseconds)."""
-    from cap_sim_bridge.world import TabletopWorld
-    return TabletopWorld('kitchen')
+    from cap_sim_bridge.world import World
+    return World('mobile')
 
 
 def _poses_within_tolerance(pose: Sequence[float]) -> list[tuple[float, float, float]]:
@@ -38,7 +38,7 @@ def sightings(objects: Sequence[tuple[str, tuple[float, float]]], poses: Sequenc
               seed: int) -> dict[str, list[bool | None]]:
     """For each object (name, (x, y) on the furniture) and each pose (x, y, yaw): True when the head camera sees it
     from there, False when it does not, None when that depends on where within the goal tolerances the base stops."""
-    from cap_sim_bridge.scene import ObjectSpec
+    from cap_sim_bridge.objects import ObjectSpec
 
     world = _world()
     names = [name for name, _ in objects]

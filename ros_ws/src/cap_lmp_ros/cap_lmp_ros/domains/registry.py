@@ -1,23 +1,18 @@
 """The robot domains lmp_node can run, each as one unit: its engine, its robot API over ROS, its scene, its cassette.
 
-A built-in domain is a sub-package of cap_lmp_ros.domains with a `domain.py` that defines `DOMAIN` (a Domain):
-adding a domain is adding a folder. Another package offers one as an entry point of the group `cap_ros.domains`
-(value: a Domain), found in every process; `register_domain` adds one in this process (tests). No rclpy here,
-nor in what a Domain names for the sandbox process (`build_engine` and its module); only `robot_api`, called in
-the node, may reach it.
+Every domain is an entry point of the group `cap_ros.domains` (value: a Domain). This package's setup.py offers
+each sub-package of cap_lmp_ros.domains that has a `domain.py` defining `DOMAIN`, so adding a domain here is adding
+a folder; another package adds a line to its own setup.py. No rclpy here, nor in what a Domain names for the sandbox
+process (`build_engine` and its module); only `robot_api`, called in the node, may reach it.
 """
 from __future__ import annotations
 
-import importlib
-import importlib.metadata
-import importlib.util
-import pkgutil
-import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Protocol
 
 from cap_lmp.approval import PlannedCall
+from cap_ros_common.plugins import PluginGroup
 from cap_lmp.engine import Engine
 from cap_lmp.isolated_engine import builder_reference
 from cap_lmp_ros.plan_steps import PlanStep, describe_as_call
@@ -116,62 +111,22 @@ class Domain:
                              f'{names}')
 
 
-# Other packages offer domains as entry points of this group (value: a Domain), found in every process.
+# Every domain, this package's own included, is an entry point of this group (name = the domain's name).
 ENTRY_POINT_GROUP = 'cap_ros.domains'
-_domains: dict[str, Domain] = {}
-_lock = threading.RLock()  # reentrant: a domain.py may register more domains while being discovered
-_discovered = False
-
-
-def _discover() -> None:
-    """Register every sub-package of cap_lmp_ros.domains that has a domain.py defining DOMAIN (once)."""
-    global _discovered
-    with _lock:
-        if _discovered:
-            return
-        _discovered = True
-        package = importlib.import_module('cap_lmp_ros.domains')
-        for module in pkgutil.iter_modules(package.__path__):
-            if not module.ispkg:
-                continue
-            name = f'{package.__name__}.{module.name}.domain'
-            if importlib.util.find_spec(name) is None:
-                continue
-            domain = getattr(importlib.import_module(name), 'DOMAIN', None)
-            if isinstance(domain, Domain):
-                _domains.setdefault(domain.name, domain)
-        # Domains of other packages: entry points of this group whose value is a Domain.
-        for entry in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
-            domain = entry.load()
-            if isinstance(domain, Domain):
-                _domains.setdefault(domain.name, domain)
-
-
-def register_domain(domain: Domain, *, replace: bool = False) -> None:
-    """Make `domain` known by its name; ValueError if another domain has that name (unless `replace`)."""
-    _discover()
-    with _lock:
-        known = _domains.get(domain.name)
-        if known is not None and known != domain and not replace:
-            raise ValueError(f'a domain named {domain.name!r} is registered already')
-        _domains[domain.name] = domain
+_domains: PluginGroup[Domain] = PluginGroup(ENTRY_POINT_GROUP, 'domain', lambda value: isinstance(value, Domain))
 
 
 def get_domain(name: str) -> Domain:
     """The domain called `name`; ValueError (one line, naming the known domains) if there is none."""
-    _discover()
-    with _lock:
-        domain = _domains.get(name)
-        if domain is None:
-            raise ValueError(f'unknown domain {name!r}; known domains: {", ".join(sorted(_domains)) or "none"}')
-        return domain
+    domain = _domains.get(name)
+    if domain.name != name:
+        raise ValueError(f'the domain offered as {name!r} calls itself {domain.name!r}')
+    return domain
 
 
 def domain_names() -> list[str]:
     """The names of every known domain, sorted."""
-    _discover()
-    with _lock:
-        return sorted(_domains)
+    return _domains.names()
 
 
 def engine_api(domain: Domain, functions: Mapping[str, Callable[..., Any]]) -> dict[str, Callable[..., Any]]:
@@ -190,13 +145,5 @@ def prompt_heads(domain: Domain) -> list[tuple[str, str]]:
     return [(name, config.prompt.rstrip('\n') + '\n') for name, config in engine.lmps.items()]
 
 
-def unregister_domain(name: str) -> None:
-    """Forget a registered domain (tests that register a toy domain clean up with this)."""
-    _discover()
-    with _lock:
-        _domains.pop(name, None)
-
-
 __all__ = ['Domain', 'ENTRY_POINT_GROUP', 'EngineBuilder', 'NodeSpec', 'PERCEPTION_NODE', 'PICK_PLACE_NODE',
-           'RobotApiFactory', 'RobotBinding', 'domain_names', 'engine_api', 'get_domain', 'register_domain',
-           'unregister_domain']
+           'RobotApiFactory', 'RobotBinding', 'domain_names', 'engine_api', 'get_domain']

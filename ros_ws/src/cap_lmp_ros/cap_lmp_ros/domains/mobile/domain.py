@@ -1,12 +1,12 @@
 """The mobile kitchen domain as a unit: the mobile LMPs, the robot API over perception, the navigation node and
-mobile pick-and-place, the 'kitchen' simulator scene and the packaged reference cassette. No rclpy at import: the
-ROS binding is imported when the node builds it."""
+mobile pick-and-place, the 'mobile' simulator scene (the kitchen) and the packaged reference cassette. No rclpy at
+import: the ROS binding is imported when the node builds it."""
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
 
-from cap_kitchen import robot
+from cap_mobile import robot
 
 from cap_lmp_ros.domains.mobile.lmps import build_engine
 from cap_lmp_ros.domains.registry import PERCEPTION_NODE, Domain, NodeSpec, RobotBinding
@@ -29,7 +29,7 @@ def robot_api(node: Any, say_publisher: Any, service_timeout_s: float, motion_ti
 
 
 DOMAIN = Domain(name='mobile', build_engine=build_engine, robot_functions=ROBOT_FUNCTIONS, robot_api=robot_api,
-                scene='kitchen', cassette=Path(__file__).resolve().parent / 'cassettes' / 'mobile_reference.yaml',
+                scene='mobile', cassette=Path(__file__).resolve().parent / 'cassettes' / 'mobile_reference.yaml',
                 nodes=(PERCEPTION_NODE, NAVIGATION_NODE, MOBILE_PICK_PLACE_NODE), query_functions=QUERY_FUNCTIONS,
                 # The kitchen's detector on the head camera, which moves with the base.
-                rgbd_perception=(('detector', 'kitchen'), ('camera', robot.HEAD_CAMERA), ('camera_moves', True)))
+                rgbd_perception=(('detector', 'mobile'), ('camera', robot.HEAD_CAMERA), ('camera_moves', True)))

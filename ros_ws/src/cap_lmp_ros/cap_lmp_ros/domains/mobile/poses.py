@@ -6,7 +6,7 @@ import math
 from typing import Any, Sequence
 
 import numpy as np
-from cap_kitchen import layout
+from cap_mobile import layout
 
 from cap_lmp.errors import RobotApiError
 

@@ -2,7 +2,7 @@
 
 Objects are perception's: `get_obj_names()` every object it knows of, `get_visible_obj_names()` and
 `is_obj_visible(name)` what the head camera sees now, `get_obj_pos(name)` where an object is (np.array([x, y]) on
-the floor plan). Locations are the kitchen's facts (cap_kitchen.layout): `get_loc_names()` and `get_loc_pos(name)`
+the floor plan). Locations are the kitchen's facts (cap_mobile.layout): `get_loc_names()` and `get_loc_pos(name)`
 answer without asking the graph. The robot's pose comes from the navigation node (`get_base_pose`); `goto_loc(name)`,
 `goto_pos(pos, angle=None)` and `follow_traj(pts)` are goals of its Navigate and NavigateThroughPoses actions.
 `pick_obj(name)`, `place_at_pos(pos)` and `place_at_obj(name)` are goals of mobile_pick_place's MobilePickPlace
@@ -16,7 +16,7 @@ import math
 from typing import Any, Callable
 
 import numpy as np
-from cap_kitchen import layout
+from cap_mobile import layout
 from cap_ros_common.actions import ActionClient
 from geometry_msgs.msg import PoseStamped
 from rclpy.callback_groups import ReentrantCallbackGroup

@@ -2,13 +2,14 @@
 import numpy as np
 import pytest
 
-from cap_perception.rgbd_detector import CameraView, detect
-from cap_sim_bridge.world import TabletopWorld
+from cap_perception.detectors.tabletop import detect
+from cap_perception.rgbd import CameraView
+from cap_sim_bridge.world import World
 
 
 @pytest.fixture(scope='module')
 def world():
-    world = TabletopWorld(seed=0)
+    world = World(seed=0)
     yield world
     world.close()
 
@@ -42,7 +43,7 @@ def test_after_placing_the_clear_view_move_leaves_the_placed_block_in_the_top_ca
     # line of sight; on the far half of the table's centre line a short move left the block behind the forearm.
     from cap_control.kinematics import HOME_JOINTS
     from cap_control.pick_place import ObjectInfo, PickPlaceConfig, StageName, plan_pick_place
-    from cap_sim_bridge.scene import ObjectSpec
+    from cap_sim_bridge.objects import ObjectSpec
 
     camera = tuple(world.camera_pose('top')[:3, 3])
     world.reset(0, [ObjectSpec('red block', 'block', 'red', spot)])

@@ -1,4 +1,4 @@
-"""The kitchen scene in MuJoCo: the furniture from cap_kitchen's layout, the mobile base on its servos, the arm stowed
+"""The kitchen scene in MuJoCo: the furniture from cap_mobile's layout, the mobile base on its servos, the arm stowed
 over it, the head camera."""
 from __future__ import annotations
 
@@ -6,14 +6,14 @@ import math
 
 import numpy as np
 import pytest
-from cap_kitchen import layout, robot
+from cap_mobile import layout, robot
 
-from cap_sim_bridge.world import ARM_JOINT_NAMES, TabletopWorld
+from cap_sim_bridge.world import ARM_JOINT_NAMES, World
 
 
 @pytest.fixture(scope='module')
 def world():
-    return TabletopWorld('kitchen', seed=0)
+    return World('mobile', seed=0)
 
 
 @pytest.fixture(autouse=True)
@@ -96,7 +96,7 @@ def test_the_arm_joints_are_the_arms_and_the_base_joints_are_published_as_the_sc
 
 
 def test_objects_stand_on_the_furniture_and_the_head_camera_sees_only_what_is_in_front_of_it(world):
-    from cap_kitchen import objects
+    from cap_mobile import objects
     states = world.object_states()
     assert [s.name for s in states] == objects.default_objects(0)
     for state in states:

@@ -15,7 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
-from cap_kitchen import layout
+from cap_mobile import layout
 
 GROUP_DRINK, GROUP_SNACK, GROUP_FRUIT = 'drink', 'snack', 'fruit'
 

@@ -1,5 +1,5 @@
-"""The kitchen scene: a room with counters, tables, chairs and bins (cap_kitchen.layout) and the mobile manipulator
-(cap_kitchen.robot): a round base on planar joints with the UR5e and its gripper on top and a head camera.
+"""The kitchen scene: a room with counters, tables, chairs and bins (cap_mobile.layout) and the mobile manipulator
+(cap_mobile.robot): a round base on planar joints with the UR5e and its gripper on top and a head camera.
 
 The base moves as mobile bases in MuJoCo commonly do: slide joints along x and y and a hinge about z, each driven
 by a stiff position servo (the world sends references with their velocities, as for the arm's joints), so the base
@@ -14,15 +14,15 @@ from typing import Sequence
 
 import mujoco
 import numpy as np
-from cap_kitchen import layout, objects as kitchen_objects, robot
+from cap_mobile import layout, objects as mobile_objects, robot
 
-from cap_sim_bridge import scene as objects_module
-from cap_sim_bridge.scene import ObjectKind, ObjectSpec, object_geom, register_object_kind
+from cap_sim_bridge import objects as objects_module
+from cap_sim_bridge.objects import ObjectKind, ObjectSpec, object_geom, register_object_kind
 from cap_sim_bridge.scenes import MODELS_DIR, SceneSpec, spec_from_mjcf
 # The fruit kinds ("apple", ...) are the whiteboard scene's: importing it registers them.
-from cap_sim_bridge import whiteboard_scene  # noqa: F401
+from cap_sim_bridge.scenes import whiteboard  # noqa: F401
 
-KITCHEN = 'kitchen'
+NAME = 'mobile'
 BASE_BODY = 'mobile_base'
 ROBOT_ROOT_BODY = 'base'  # the UR5e's root body in ur5e_gripper.xml
 TABLETOP_PEDESTAL = 'pedestal'  # the geom of ur5e_gripper.xml the arm stands on at the table top
@@ -149,7 +149,7 @@ def _add_mobile_base(spec: mujoco.MjSpec) -> None:
 
 
 def build(objects: Sequence[ObjectSpec]) -> mujoco.MjSpec:
-    spec = spec_from_mjcf((MODELS_DIR / 'kitchen.xml').read_text(encoding='utf-8'))
+    spec = spec_from_mjcf((MODELS_DIR / 'mobile.xml').read_text(encoding='utf-8'))
     _add_walls(spec)
     for piece in layout.FURNITURE:
         _add_piece(spec, piece)
@@ -157,7 +157,7 @@ def build(objects: Sequence[ObjectSpec]) -> mujoco.MjSpec:
     return objects_module.add_objects(spec, objects)
 
 
-def _kind_geoms(kind: kitchen_objects.KitchenKind):
+def _kind_geoms(kind: mobile_objects.KitchenKind):
     def add(body: mujoco.MjsBody, obj: ObjectSpec) -> None:
         if kind.shape == 'cylinder':
             object_geom(body, obj, name=obj.name, type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=list(kind.size),
@@ -167,18 +167,18 @@ def _kind_geoms(kind: kitchen_objects.KitchenKind):
     return add
 
 
-for _kind in kitchen_objects.KINDS.values():
+for _kind in mobile_objects.KINDS.values():
     register_object_kind(ObjectKind(_kind.name, _kind_geoms(_kind), _kind.resting_height, _kind.color_name))
 
 
 def default_objects(seed: int) -> list[ObjectSpec]:
-    """The seed's episode (cap_kitchen.objects.default_objects): snacks, drinks and fruit."""
-    return [ObjectSpec.from_name(name) for name in kitchen_objects.default_objects(seed)]
+    """The seed's episode (cap_mobile.objects.default_objects): snacks, drinks and fruit."""
+    return [ObjectSpec.from_name(name) for name in mobile_objects.default_objects(seed)]
 
 
 def spawn_positions(specs: Sequence[ObjectSpec], seed: int) -> list[tuple[float, float, float]]:
     """(x, y, height of the surface there) for every object: on the furniture tops, or where a spec says."""
-    return kitchen_objects.spawn_positions(len(specs), seed, [spec.position for spec in specs])
+    return mobile_objects.spawn_positions(len(specs), seed, [spec.position for spec in specs])
 
 
 def initialize(model: mujoco.MjModel, data: mujoco.MjData, seed: int) -> None:
@@ -187,10 +187,10 @@ def initialize(model: mujoco.MjModel, data: mujoco.MjData, seed: int) -> None:
         data.qpos[model.jnt_qposadr[model.joint(name).id]] = value
 
 
-SCENE = SceneSpec(KITCHEN, build=build, default_objects=default_objects, spawn_positions=spawn_positions,
+SCENE = SceneSpec(NAME, build=build, default_objects=default_objects, spawn_positions=spawn_positions,
                   camera_names=(robot.HEAD_CAMERA,), home_joints=robot.STOWED_JOINTS, initialize=initialize,
                   visibility_camera=robot.HEAD_CAMERA,
                   description='a kitchen-office with counters, tables, chairs, bins, snacks, drinks and fruit; the '
                               'UR5e on a mobile base')
 
-__all__ = ['BASE_BODY', 'KITCHEN', 'SCENE', 'build']
+__all__ = ['BASE_BODY', 'NAME', 'SCENE', 'build']

@@ -1,9 +1,9 @@
-"""Finds the kitchen's objects (cap_kitchen.objects) in one frame of the mobile robot's head RGB-D camera (OpenCV +
-NumPy, no learning), with the table-top detector's first steps (cap_perception.rgbd_detector).
+"""The mobile domain's detector: the kitchen's objects (cap_mobile.objects) in one frame of the mobile robot's head
+RGB-D camera (OpenCV + NumPy, no learning), from the steps every detector shares (cap_perception.rgbd).
 
 1. Deproject every pixel into the world frame and keep the points that stand on a piece of furniture: inside its
    footprint (a margin inside its edges, which leaves out a bin's walls), above its surface
-   (cap_kitchen.objects.surface_height) and at most a little more than the tallest kind above it. The floor, the
+   (cap_mobile.objects.surface_height) and at most a little more than the tallest kind above it. The floor, the
    walls and the robot's base are never kept; the arm, when it reaches over the furniture, has none of the kinds'
    colours.
 2. Label the kept pixels with their palette colour and group them per colour into candidates (connected regions,
@@ -27,12 +27,12 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from cap_kitchen import layout, objects as kitchen_objects
+from cap_mobile import layout, objects as mobile_objects
 from cap_tabletop.palette import rgba
 from cap_whiteboard.objects import FRUIT
 
 from cap_perception.objects import PerceivedObject
-from cap_perception.rgbd_detector import CameraView, ColorRegionConfig, color_clouds, deproject
+from cap_perception.rgbd import CameraView, ColorRegionConfig, color_clouds, deproject
 
 
 @dataclass(frozen=True)
@@ -51,9 +51,9 @@ class KindSize:
 
 
 def _kind_size(name: str) -> KindSize:
-    """The extents of a kind from its shape and size (cap_kitchen's kinds, cap_whiteboard's fruit)."""
-    if name in kitchen_objects.KINDS:
-        kind = kitchen_objects.KINDS[name]
+    """The extents of a kind from its shape and size (cap_mobile's kinds, cap_whiteboard's fruit)."""
+    if name in mobile_objects.KINDS:
+        kind = mobile_objects.KINDS[name]
         if kind.shape == 'cylinder':
             radius, half_height = kind.size[:2]
             return KindSize(name, kind.color_name, 2 * radius, 2 * radius, 2 * half_height)
@@ -67,7 +67,7 @@ def _kind_size(name: str) -> KindSize:
     return KindSize(name, fruit.color_name, 2 * (radius + half_length), 2 * radius, 2 * radius)
 
 
-KIND_SIZES: dict[str, KindSize] = {name: _kind_size(name) for name in kitchen_objects.OBJECT_NAMES}
+KIND_SIZES: dict[str, KindSize] = {name: _kind_size(name) for name in mobile_objects.OBJECT_NAMES}
 
 
 @dataclass(frozen=True)
@@ -103,8 +103,8 @@ _KIND_COLORS = frozenset(size.color_name for size in KIND_SIZES.values())
 
 
 def _surfaces() -> list[tuple[tuple[float, float, float, float], float]]:
-    """(footprint, surface height) of every piece of furniture (what cap_kitchen.objects says stands there)."""
-    return [(piece.footprint, kitchen_objects.surface_height(*piece.centre)) for piece in layout.FURNITURE]
+    """(footprint, surface height) of every piece of furniture (what cap_mobile.objects says stands there)."""
+    return [(piece.footprint, mobile_objects.surface_height(*piece.centre)) for piece in layout.FURNITURE]
 
 
 def _on_furniture(points: np.ndarray, valid: np.ndarray, config: KitchenDetectorConfig) -> np.ndarray:
@@ -210,7 +210,7 @@ def _classify(color: str, cloud: np.ndarray, frame: _Frame, config: KitchenDetec
 def _surface_under(cloud: np.ndarray) -> float:
     """The surface the points of one candidate stand on (that of the furniture under their middle)."""
     x, y = np.median(cloud[:, :2], axis=0)
-    return kitchen_objects.surface_height(float(x), float(y))
+    return mobile_objects.surface_height(float(x), float(y))
 
 
 def _nearest_kind(color: str, measured: tuple[float, float, float], cut: bool,
@@ -230,3 +230,6 @@ def _nearest_kind(color: str, measured: tuple[float, float, float], cut: bool,
         if error < mismatch:
             best, mismatch = size, error
     return best
+
+
+DETECTOR = detect_kitchen

@@ -3,13 +3,13 @@ centre; metres, radians).
 
 A round base that moves on the floor (x, y and yaw, as the joints base_x, base_y and base_yaw of the simulator),
 the UR5e with its gripper on top, a little ahead of the centre, and a head RGB-D camera on a mast behind the arm,
-looking ahead and down. The footprint's radius and the speed limits are the layout's (cap_kitchen.layout).
+looking ahead and down. The footprint's radius and the speed limits are the layout's (cap_mobile.layout).
 """
 from __future__ import annotations
 
 import math
 
-from cap_kitchen.layout import BASE_RADIUS
+from cap_mobile.layout import BASE_RADIUS
 
 BASE_JOINT_NAMES: tuple[str, str, str] = ('base_x', 'base_y', 'base_yaw')
 BASE_HEIGHT = 0.6  # [m] top of the base, where the arm stands (high enough to reach down onto a counter)

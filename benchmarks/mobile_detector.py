@@ -1,4 +1,4 @@
-"""The kitchen's RGB-D detector (cap_perception.kitchen_detector) on MuJoCo renders of the head camera.
+"""The kitchen's RGB-D detector (cap_perception.detectors.mobile) on MuJoCo renders of the head camera.
 
 Per seeded episode (the kitchen's default objects of the seed), the base drives by its servos from the start pose
 to the approach pose of the table, the countertop and the desk (each a straight drive from the room's open middle)
@@ -7,7 +7,7 @@ the head camera): precision (the objects found that the camera sees, under the r
 camera sees that are found), the position error of those found (3-D distance to the centre of the bounding box) and
 the detector's time per frame. One core is used.
 
-Prints one JSON object. Run: source scripts/env.sh && python benchmarks/kitchen_detector.py [--episodes 30]
+Prints one JSON object. Run: source scripts/env.sh && python benchmarks/mobile_detector.py [--episodes 30]
 """
 from __future__ import annotations
 
@@ -17,11 +17,11 @@ import math
 import time
 
 import numpy as np
-from cap_kitchen import layout, robot
+from cap_mobile import layout, robot
 
-from cap_perception.kitchen_detector import detect_kitchen
-from cap_perception.rgbd_detector import CameraView
-from cap_sim_bridge.world import TabletopWorld
+from cap_perception.detectors.mobile import detect_kitchen
+from cap_perception.rgbd import CameraView
+from cap_sim_bridge.world import World
 
 VIEWPOINTS = ('table', 'countertop', 'desk')
 WIDTH, HEIGHT = 640, 480
@@ -40,7 +40,7 @@ def main() -> None:
     parser.add_argument('--episodes', type=int, default=30)
     parser.add_argument('--first-seed', type=int, default=1000)
     args = parser.parse_args()
-    world = TabletopWorld('kitchen', seed=args.first_seed)
+    world = World('mobile', seed=args.first_seed)
     found_total = true_found = seen_total = 0
     errors, seconds, misses, phantoms = [], [], [], []
     for seed in range(args.first_seed, args.first_seed + args.episodes):

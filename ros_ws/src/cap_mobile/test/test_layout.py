@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from cap_kitchen.layout import (
+from cap_mobile.layout import (
     BASE_RADIUS, BIN_NAMES, FURNITURE, ROOM_X_RANGE, ROOM_Y_RANGE, START_POSE, UnknownLocationError, location,
 )
 

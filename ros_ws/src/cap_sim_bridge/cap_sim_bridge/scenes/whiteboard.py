@@ -15,12 +15,12 @@ import mujoco
 from cap_tabletop import cameras as tabletop_cameras
 from cap_whiteboard import board, objects as board_objects, tool
 
-from cap_sim_bridge import scene as objects_module
+from cap_sim_bridge import objects as objects_module
 from cap_sim_bridge.ink import InkSpec
-from cap_sim_bridge.scene import ObjectKind, ObjectSpec, object_geom, register_object_kind
+from cap_sim_bridge.objects import ObjectKind, ObjectSpec, object_geom, register_object_kind
 from cap_sim_bridge.scenes import MODELS_DIR, SceneSpec
 
-WHITEBOARD = 'whiteboard'
+NAME = 'whiteboard'
 BOARD_GEOM = 'whiteboard'
 INK_GEOM = 'whiteboard_ink'
 INK_TEXTURE = 'whiteboard_ink'
@@ -141,10 +141,10 @@ def spawn_positions(specs: Sequence[ObjectSpec], seed: int) -> list[tuple[float,
                                                  board_objects.SPAWN_Y_RANGE, board_objects.SPAWN_MIN_SEPARATION)
 
 
-SCENE = SceneSpec(WHITEBOARD, build=_build, default_objects=default_objects, spawn_positions=spawn_positions,
+SCENE = SceneSpec(NAME, build=_build, default_objects=default_objects, spawn_positions=spawn_positions,
                   camera_names=tabletop_cameras.CAMERA_NAMES, surface_z=board.SURFACE_Z, ink=INK,
                   home_gripper_opening=tool.GRIP_OPENING,
                   description='a whiteboard on the table, a marker and an eraser on the arm, blocks and fruit')
 
-__all__ = ['ERASER_JOINT', 'ERASER_PAD_GEOM', 'INK', 'MARKER_JOINT', 'MARKER_TIP_GEOM', 'SCENE', 'WHITEBOARD',
+__all__ = ['ERASER_JOINT', 'ERASER_PAD_GEOM', 'INK', 'MARKER_JOINT', 'MARKER_TIP_GEOM', 'NAME', 'SCENE',
            'default_objects', 'spawn_positions']

@@ -1,6 +1,6 @@
 from setuptools import find_packages, setup
 
-package_name = 'cap_kitchen'
+package_name = 'cap_mobile'
 
 setup(
     name=package_name,

@@ -1,10 +1,9 @@
 """The 'controllers' scene: the UR5e free to move and a cart-pole behind it (models/controllers.xml).
 
-Offered to every process through the entry-point group `cap_ros.scenes` (cap_sim_bridge's setup.py), like a scene
-of another package. A reset with seed s places the cart-pole at a start drawn from s: the cart's x and the pole's
+A reset with seed s places the cart-pole at a start drawn from s: the cart's x and the pole's
 theta each uniform in +-INITIAL_STATE_RANGE (cap_controllers.plants), at rest. Two equality constraints (the
 holds, `cart_hold` and `pole_hold`) keep it there until a controller takes it over
-(TabletopWorld.release_holds); from then on only the cart's motor and gravity move it.
+(World.release_holds); from then on only the cart's motor and gravity move it.
 """
 from __future__ import annotations
 
@@ -14,8 +13,8 @@ import mujoco
 import numpy as np
 from cap_controllers import plants
 
-from cap_sim_bridge import scene as objects_module
-from cap_sim_bridge.scene import ObjectSpec
+from cap_sim_bridge import objects as objects_module
+from cap_sim_bridge.objects import ObjectSpec
 from cap_sim_bridge.scenes import MODELS_DIR, SceneSpec, spec_from_mjcf
 
 NAME = 'controllers'

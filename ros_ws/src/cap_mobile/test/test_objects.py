@@ -3,7 +3,7 @@ import math
 
 import pytest
 
-from cap_kitchen import layout, objects
+from cap_mobile import layout, objects
 
 
 def test_every_object_has_a_group_and_the_snacks_drinks_and_fruit_are_told_apart():

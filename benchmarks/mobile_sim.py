@@ -7,7 +7,7 @@ time over the wall time it took (the real-time factor while the base drives and 
 Also the real-time factor at rest and with the head camera rendered at 640x480 (10 and 2 frames a second of
 simulated time). One core is used.
 
-Prints one JSON object. Run: source scripts/env.sh && python benchmarks/kitchen_sim.py [--drives 30]
+Prints one JSON object. Run: source scripts/env.sh && python benchmarks/mobile_sim.py [--drives 30]
 """
 from __future__ import annotations
 
@@ -19,12 +19,12 @@ import time
 from concurrent.futures import Future
 
 import numpy as np
-from cap_kitchen import layout, robot
+from cap_mobile import layout, robot
 
 from cap_control.navigation import wrap_angle
 from cap_control.navigation_executor import Base, NavigateRequest, NavigationExecutor
 from cap_control.ports import ArmOutcome, ArmResult, Ending, Interruption, PendingGoal
-from cap_sim_bridge.world import TabletopWorld
+from cap_sim_bridge.world import World
 
 
 def _done(value=None) -> Future:
@@ -54,7 +54,7 @@ class WorldBase(Base):
 
     server_description = 'the simulated base'
 
-    def __init__(self, world: TabletopWorld):
+    def __init__(self, world: World):
         self.world = world
         self.simulated = 0.0  # [s] while driving
         self.wall = 0.0
@@ -89,7 +89,7 @@ def _stats(values) -> dict:
             'max': round(float(values.max()), 4)}
 
 
-def _rtf(world: TabletopWorld, seconds: float, camera_rate: float = 0.0) -> float:
+def _rtf(world: World, seconds: float, camera_rate: float = 0.0) -> float:
     started, start_time = time.perf_counter(), world.time
     next_frame = world.time
     while world.time < start_time + seconds:
@@ -105,7 +105,7 @@ def main() -> None:
     parser.add_argument('--drives', type=int, default=30)
     parser.add_argument('--seed', type=int, default=0)
     args = parser.parse_args()
-    world = TabletopWorld('kitchen', seed=args.seed)
+    world = World('mobile', seed=args.seed)
     base = WorldBase(world)
     executor = NavigationExecutor(base)
     rng = random.Random(args.seed)

@@ -5,13 +5,13 @@ import math
 
 import numpy as np
 import pytest
-from cap_kitchen import layout, robot
+from cap_mobile import layout, robot
 
 from cap_control.navigation import plan_path
 from cap_control.navigation_executor import NavigationConfig
-from cap_perception.kitchen_detector import detect_kitchen
-from cap_perception.rgbd_detector import CameraView
-from cap_sim_bridge.world import TabletopWorld
+from cap_perception.detectors.mobile import detect_kitchen
+from cap_perception.rgbd import CameraView
+from cap_sim_bridge.world import World
 
 SURFACES = ('table', 'countertop', 'desk')
 GRID = NavigationConfig().grid()
@@ -19,12 +19,12 @@ GRID = NavigationConfig().grid()
 
 @pytest.fixture(scope='module')
 def world():
-    world = TabletopWorld('kitchen', seed=0)
+    world = World('mobile', seed=0)
     yield world
     world.close()
 
 
-def _look_from(world: TabletopWorld, seed: int, location: str):
+def _look_from(world: World, seed: int, location: str):
     """The seed's episode seen from the location's approach pose: (objects found, ground truth by name)."""
     world.reset(seed)
     # Along the planner's path around the furniture, a straight leg from corner to corner at 0.4 m/s, turning on
