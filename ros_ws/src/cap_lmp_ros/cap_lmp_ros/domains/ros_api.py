@@ -196,26 +196,35 @@ class RosRobotApi:
         del self.api_call_seconds[:-10000]
 
     def _wait(self, future, timeout_s: float, what: str, cancel: Callable[[], Any] | None = None):
-        """Wait for a future that the node's executor completes in another thread; honour stop requests."""
-        done = threading.Event()
-        future.add_done_callback(lambda _: done.set())
-        deadline = time.monotonic() + timeout_s
-        cancelled = False
-        while not done.wait(0.01):
-            if self.stop_requested.is_set() and not cancelled:
-                if cancel is None:
-                    future.cancel()
-                    raise StoppedError(f'stopped while waiting for {what}')
-                cancel()  # keep waiting for the cancelled result: the motion reports where it stopped
-                cancelled = True
-                deadline = time.monotonic() + self.service_timeout_s
-            if time.monotonic() > deadline:
-                if cancel is not None:
-                    cancel()
-                raise RobotApiError(f'{what} did not answer within {timeout_s:.0f} s')
-        if future.exception() is not None:
-            raise RobotApiError(f'{what} failed: {future.exception()}')
-        return future.result()
+        return wait_for_future(future, timeout_s, what, self.stop_requested, self.service_timeout_s, cancel)
 
 
-__all__ = ['MAX_NAME_CHARS', 'MAX_SAY_CHARS', 'RosRobotApi']
+def wait_for_future(future, timeout_s: float, what: str, stop_requested: threading.Event, cancel_timeout_s: float,
+                    cancel: Callable[[], Any] | None = None):
+    """The result of a future that the node's executor completes in another thread, waited for on an event (never by
+    spinning); RobotApiError when it fails or does not come within `timeout_s`. When `stop_requested` is set, a
+    future with no `cancel` is dropped (StoppedError); with one, the goal is cancelled and its result still awaited
+    for `cancel_timeout_s`, so that the motion reports where it stopped."""
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    deadline = time.monotonic() + timeout_s
+    cancelled = False
+    # done() too: a future already done when the callback is added hands the callback to its executor as a task,
+    # which an idle events executor may not run for a long time.
+    while not done.wait(0.01) and not future.done():
+        if stop_requested.is_set() and not cancelled:
+            if cancel is None:
+                future.cancel()
+                raise StoppedError(f'stopped while waiting for {what}')
+            cancel()
+            cancelled = True
+            deadline = time.monotonic() + cancel_timeout_s
+        if time.monotonic() > deadline:
+            if cancel is not None:
+                cancel()
+            raise RobotApiError(f'{what} did not answer within {timeout_s:.0f} s')
+    if future.exception() is not None:
+        raise RobotApiError(f'{what} failed: {future.exception()}')
+    return future.result()
+
+__all__ = ['MAX_NAME_CHARS', 'MAX_SAY_CHARS', 'RosRobotApi', 'wait_for_future']

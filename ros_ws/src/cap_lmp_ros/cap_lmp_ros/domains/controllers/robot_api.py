@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from typing import Any, Callable
 
 import numpy as np
@@ -29,6 +28,7 @@ from cap_interfaces.srv import CallController, GetPlantState
 from cap_lmp.errors import RobotApiError, StoppedError
 from cap_lmp.isolated_engine import CallableHandle, InvokeError
 from cap_lmp.safe_text import wire_text
+from cap_lmp_ros.domains.ros_api import wait_for_future
 
 MAX_SAY_CHARS = 2000
 SAFE = {'cartpole': "the cart's motor was switched off", 'arm': 'the arm holds where it stopped'}
@@ -172,23 +172,4 @@ class RosControllersApi:
 
     # -------------------------------------------------------------------------------------------- plumbing
     def _wait(self, future, timeout_s: float, what: str, cancel: Callable[[], Any] | None = None):
-        """Wait for a future that the node's executor completes in another thread; honour stop requests."""
-        done = threading.Event()
-        future.add_done_callback(lambda _: done.set())
-        deadline = time.monotonic() + timeout_s
-        cancelled = False
-        while not done.wait(0.01) and not future.done():  # done() too: see controller_node._wait
-            if self.stop_requested.is_set() and not cancelled:
-                if cancel is None:
-                    future.cancel()
-                    raise StoppedError(f'stopped while waiting for {what}')
-                cancel()  # keep waiting for the cancelled result: the run reports where it stopped
-                cancelled = True
-                deadline = time.monotonic() + self.service_timeout_s
-            if time.monotonic() > deadline:
-                if cancel is not None:
-                    cancel()
-                raise RobotApiError(f'{what} did not answer within {timeout_s:.0f} s')
-        if future.exception() is not None:
-            raise RobotApiError(f'{what} failed: {future.exception()}')
-        return future.result()
+        return wait_for_future(future, timeout_s, what, self.stop_requested, self.service_timeout_s, cancel)
