@@ -30,13 +30,17 @@ fi
 step "fixing the ROS wheels' CMake exports"
 "$VENV/bin/python" scripts/fix_ros_wheels.py
 
+# The standard interfaces (control_msgs, nav2_msgs, tf2_msgs) are built here only where the ROS prefix lacks them:
+# the PyPI wheels do; a regular ROS 2 install does not (scripts/standard_interfaces.py).
+standard=$(AMENT_PREFIX_PATH=$VENV "$VENV/bin/python" scripts/standard_interfaces.py | tr '\n' ' ')
 # Build inputs only: with --symlink-install, edits to Python modules need no rebuild, while manifests, setup files,
 # interface definitions, resources and config do, and so does a module added or removed (setup.py files offer the
 # modules of their plug-in folders as entry points): the list of module paths counts, not their contents.
 src_hash=$( (find ros_ws/src -type f \( -name package.xml -o -name setup.py -o -name setup.cfg -o -name CMakeLists.txt \
     -o -name '*.msg' -o -name '*.srv' -o -name '*.action' -o -path '*/resource/*' -o -path '*/config/*' \
     -o -path '*/launch/*' \) -print0 | sort -z | xargs -0 sha1sum; find ros_ws/src -name '*.py' | sort;
-    echo "$req_hash") | sha1sum | cut -d' ' -f1)
+    find ros_ws/standard_interfaces -type f -print0 | sort -z | xargs -0 sha1sum; echo "$standard $req_hash") \
+    | sha1sum | cut -d' ' -f1)
 if [ "$(cat ros_ws/install/.cap-source 2>/dev/null)" != "$src_hash" ]; then
   step "building ros_ws with colcon"
   (
@@ -44,7 +48,9 @@ if [ "$(cat ros_ws/install/.cap-source 2>/dev/null)" != "$src_hash" ]; then
     # The venv is the ament prefix: without this CMake finds no rosidl package (the ROS wheels' CMake files look for packages under it).
     export AMENT_PREFIX_PATH=$VENV CMAKE_PREFIX_PATH=$VENV
     cd ros_ws
-    colcon --log-base log build --symlink-install --event-handlers console_cohesion- summary+ \
+    # shellcheck disable=SC2086  # one base path per word
+    colcon --log-base log build --symlink-install --base-paths src $standard \
+      --event-handlers console_cohesion- summary+ \
       --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF
   )
   echo "$src_hash" > ros_ws/install/.cap-source
