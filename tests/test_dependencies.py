@@ -29,7 +29,7 @@ THIRD_PARTY = {
 # ROS packages imported under their own names.
 ROS = {'rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs', 'sensor_msgs', 'geometry_msgs', 'trajectory_msgs',
        'builtin_interfaces', 'rosgraph_msgs', 'action_msgs', 'visualization_msgs', 'ament_index_python',
-       'nav_msgs'}
+       'nav_msgs', 'tf2_msgs', 'control_msgs', 'nav2_msgs'}
 
 
 def imported_modules(path: pathlib.Path) -> set[str]:

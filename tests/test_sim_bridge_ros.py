@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from action_msgs.msg import GoalStatus
 from builtin_interfaces.msg import Duration
-from geometry_msgs.msg import Point, PoseStamped
+from geometry_msgs.msg import Point
 from rclpy.action import ActionClient
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
@@ -26,6 +26,7 @@ from cap_control.kinematics import HOME_JOINTS, inverse_kinematics, top_down_pos
 from cap_interfaces.action import FollowJointTrajectory, GripperCommand
 from cap_interfaces.msg import GraphNames, JointTolerance, ObjectArray, ObjectSpec
 from cap_interfaces.srv import ResetScene
+from cap_ros_common.tf import TfListener
 from cap_sim_bridge.bridge_node import SimBridgeNode
 from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES
 from cap_tabletop.cameras import CAMERA_NAMES
@@ -58,7 +59,7 @@ class Client:
             node.create_subscription(Image, f'{prefix}/color', keep(f'{camera}/color'), qos_profile_sensor_data)
             node.create_subscription(Image, f'{prefix}/depth', keep(f'{camera}/depth'), qos_profile_sensor_data)
             node.create_subscription(CameraInfo, f'{prefix}/camera_info', keep(f'{camera}/info'), 10)
-            node.create_subscription(PoseStamped, f'{prefix}/pose', keep(f'{camera}/pose'), LATCHED)
+        self.tf = TfListener(node)
         self.reset = node.create_client(ResetScene, GraphNames.SIM_RESET_SERVICE)
         self.trajectory = ActionClient(node, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION)
         self.gripper = ActionClient(node, GripperCommand, GraphNames.SIM_GRIPPER_ACTION)
@@ -158,8 +159,8 @@ def test_reset_ground_truth_trajectory_gripper_and_images(graph, spin_until):
     fingers = [joints.position[list(joints.name).index(n)] for n in GRIPPER_JOINT_NAMES]
     assert sum(fingers) == pytest.approx(0.08, abs=0.002)
 
-    # Images of every camera with the configured size and encodings, and matching camera_info and pose.
-    keys = [f'{c}/{kind}' for c in CAMERA_NAMES for kind in ('color', 'depth', 'info', 'pose')]
+    # Images of every camera with the configured size and encodings, matching camera_info, the pose on tf.
+    keys = [f'{c}/{kind}' for c in CAMERA_NAMES for kind in ('color', 'depth', 'info')]
     assert spin_until(executor, lambda: all(k in client.latest for k in keys), timeout=WAIT)
     for camera in CAMERA_NAMES:
         color, depth = client.latest[f'{camera}/color'], client.latest[f'{camera}/depth']
@@ -174,10 +175,11 @@ def test_reset_ground_truth_trajectory_gripper_and_images(graph, spin_until):
         assert np.all(np.isfinite(metres)) and 0.3 < float(np.median(metres)) < 3.0
         pixels = np.frombuffer(bytes(color.data), dtype=np.uint8).reshape(HEIGHT, WIDTH, 3)
         assert pixels.std() > 10, 'a real picture, not a blank frame'
-    top_pose = client.latest['top/pose'].pose
-    assert (top_pose.position.x, top_pose.position.y) == pytest.approx((0.0, -0.5))
+    assert spin_until(executor, lambda: client.tf.buffer.can_transform('world', 'top_optical_frame'), timeout=WAIT)
+    top_pose = client.tf.buffer.lookup('world', 'top_optical_frame')
+    assert top_pose[:2, 3] == pytest.approx((0.0, -0.5))
     # Optical frame of a camera looking straight down: a half turn about x.
-    assert abs(top_pose.orientation.x) == pytest.approx(1.0, abs=1e-6)
+    assert np.allclose(top_pose[:3, :3], np.diag([1.0, -1.0, -1.0]), atol=1e-6)
     # Sim time is the time base: /clock is ahead of the start and images are stamped with it.
     clock = client.latest['clock'].clock
     assert clock.sec + clock.nanosec * 1e-9 > 2.0

@@ -29,6 +29,7 @@ setup(
     entry_points={
         'console_scripts': [
             'sim_bridge = cap_sim_bridge.bridge_node:main',
+            'robot_state = cap_sim_bridge.robot_state_node:main',
             'cap_sim_render = cap_sim_bridge.render_cli:main',
         ],
         # The scenes the bridge's `scene` parameter names (cap_sim_bridge.scenes).

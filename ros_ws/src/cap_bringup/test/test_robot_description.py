@@ -8,11 +8,13 @@ import xml.etree.ElementTree as ElementTree
 import mujoco
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 from cap_mobile.robot import BASE_JOINT_NAMES
 
 from cap_control.kinematics import forward_kinematics
 from cap_sim_bridge.scenes import build_model
-from cap_sim_bridge.urdf import robot_urdf, rpy_of_quaternion
+from cap_sim_bridge.robot_state import RobotState
+from cap_sim_bridge.urdf import BASE_LINK, WORLD_LINK, robot_urdf, rpy_of_quaternion
 from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES
 
 
@@ -21,39 +23,9 @@ def urdf() -> ElementTree.Element:
     return ElementTree.fromstring(robot_urdf(build_model([])))
 
 
-def _rotation(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    cr, sr, cp, sp, cy, sy = (f(a) for a in (roll, pitch, yaw) for f in (math.cos, math.sin))
-    return (np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]]) @ np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-            @ np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]]))
-
-
-def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
-    x, y, z = axis / np.linalg.norm(axis)
-    k = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
-    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
-
-
-def _link_pose(urdf: ElementTree.Element, link: str, positions: dict[str, float]) -> np.ndarray:
-    """The world pose of `link` by the URDF's joints, as robot_state_publisher computes it."""
-    by_child = {joint.find('child').get('link'): joint for joint in urdf.findall('joint')}
-    chain = []
-    while link in by_child:
-        chain.append(by_child[link])
-        link = by_child[link].find('parent').get('link')
-    pose = np.eye(4)
-    for joint in reversed(chain):
-        origin = joint.find('origin')
-        step = np.eye(4)
-        step[:3, :3] = _rotation(*map(float, origin.get('rpy').split()))
-        step[:3, 3] = [float(v) for v in origin.get('xyz').split()]
-        motion = np.eye(4)
-        value = positions.get(joint.get('name'), 0.0)
-        if joint.get('type') in ('revolute', 'continuous'):
-            motion[:3, :3] = _axis_angle(np.array([float(v) for v in joint.find('axis').get('xyz').split()]), value)
-        elif joint.get('type') == 'prismatic':
-            motion[:3, 3] = value * np.array([float(v) for v in joint.find('axis').get('xyz').split()])
-        pose = pose @ step @ motion
-    return pose
+def _link_pose(urdf: ElementTree.Element, link: str, positions: dict[str, float], root: str = WORLD_LINK) -> np.ndarray:
+    """The pose of `link` in `root` by the URDF's joints, as robot_state_publisher computes it."""
+    return RobotState(ElementTree.tostring(urdf, encoding='unicode')).link_poses(positions, root)[link]
 
 
 def test_the_urdf_names_the_joints_the_simulator_publishes(urdf):
@@ -72,21 +44,26 @@ def test_the_urdf_chain_is_the_dh_chain_of_the_ur5e(urdf, seed):
 
 @pytest.mark.parametrize('seed', range(3))
 def test_the_mobile_manipulators_urdf_moves_its_flange_where_the_simulator_does(seed):
-    """The kitchen's base joints (x, y and a yaw about the base's centre, off the arm's root frame) as a chain."""
+    """The URDF hangs from base_link (the base's centre on the floor); base_link's pose in the world is the base
+    joints' values (x, y and a yaw about the base's centre), which the simulator sends as odom -> base_link."""
     model = build_model([], 'mobile')
     urdf = ElementTree.fromstring(robot_urdf(model))
     rng = np.random.default_rng(seed)
-    positions = dict(zip(BASE_JOINT_NAMES, [*rng.uniform(-2, 2, 2), rng.uniform(-math.pi, math.pi)]))
-    positions.update(zip(ARM_JOINT_NAMES, rng.uniform(-math.pi, math.pi, 6)))
+    base = [*rng.uniform(-2, 2, 2), rng.uniform(-math.pi, math.pi)]
+    positions = dict(zip(ARM_JOINT_NAMES, rng.uniform(-math.pi, math.pi, 6)))
     data = mujoco.MjData(model)
-    for name, value in positions.items():
+    for name, value in [*positions.items(), *zip(BASE_JOINT_NAMES, base)]:
         data.qpos[model.jnt_qposadr[model.joint(name).id]] = value
     mujoco.mj_kinematics(model, data)
     expected = np.eye(4)
     expected[:3, :3], expected[:3, 3] = data.body('flange').xmat.reshape(3, 3), data.body('flange').xpos
-    assert np.allclose(_link_pose(urdf, 'flange', positions), expected, atol=1e-4)  # URDF's 6 digits
-    moving = [joint.get('name') for joint in urdf.findall('joint') if joint.get('type') != 'fixed']
-    assert moving[:3] == list(BASE_JOINT_NAMES)
+    base_link = np.eye(4)
+    base_link[:3, :3] = Rotation.from_euler('z', base[2]).as_matrix()
+    base_link[:3, 3] = [base[0], base[1], 0.0]
+    flange = base_link @ _link_pose(urdf, 'flange', positions, BASE_LINK)
+    assert np.allclose(flange, expected, atol=1e-4)  # URDF's six digits
+    assert urdf.find('link').get('name') == BASE_LINK
+    assert not {joint.get('name') for joint in urdf.findall('joint')} & set(BASE_JOINT_NAMES)
 
 
 def test_rpy_of_a_quaternion():

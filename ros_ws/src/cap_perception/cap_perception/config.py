@@ -4,7 +4,8 @@ from __future__ import annotations
 import dataclasses
 
 from cap_ros_common.parameters import parameter
-from cap_tabletop.cameras import CAMERAS, DEFAULT_CAMERA, optical_orientation_xyzw
+from cap_interfaces.msg import GraphNames
+from cap_tabletop.cameras import DEFAULT_CAMERA
 
 from cap_perception.detectors import detector_names
 
@@ -21,22 +22,20 @@ class PerceptionConfig:
                                           'tabletop (the blocks and bowls on the table, best from the top camera), '
                                           'mobile (the kitchen\'s objects on its furniture, from the mobile base\'s '
                                           'head camera: camera head, camera_moves true), or another package\'s.')
-    camera: str = parameter(DEFAULT_CAMERA, 'Camera whose images the detector reads '
-                                            '(topics <camera namespace>/<camera>/{color,depth,camera_info,pose}).')
-    camera_pose_from_topic: bool = parameter(True, 'Take the camera pose from the latched <camera>/pose topic (the '
-                                                   'sim bridge publishes it); false: use the camera_position and '
-                                                   'camera_orientation parameters.')
-    camera_moves: bool = parameter(False, 'The camera moves with the robot (the mobile base\'s head camera): each '
-                                          'frame is analysed with the <camera>/pose message stamped as the frame '
-                                          '(the sim bridge sends one with every frame of a moving camera); false: '
-                                          'with the latest pose.')
-    camera_position: tuple[float, ...] = parameter(
-        tuple(CAMERAS[DEFAULT_CAMERA].position),
-        'Camera optical frame origin in the world frame [m] (extrinsic calibration).')
-    camera_orientation: tuple[float, ...] = parameter(
-        tuple(float(v) for v in optical_orientation_xyzw(CAMERAS[DEFAULT_CAMERA])),
-        'Camera optical frame orientation in the world frame, quaternion x, y, z, w (ROS optical convention: '
-        '+z forward, +y down).')
+    camera: str = parameter(DEFAULT_CAMERA, 'Camera whose images the detector reads: the topics '
+                                            '<camera namespace>/<camera>/{color,depth,camera_info} unless the '
+                                            'three topic parameters below name others.')
+    color_topic: str = parameter('', 'Colour image topic (rgb8, bgr8); empty: <camera namespace>/<camera>/color.')
+    depth_topic: str = parameter('', 'Depth image topic aligned with the colour image (32FC1 in metres or 16UC1 '
+                                     'in millimetres); empty: <camera namespace>/<camera>/depth.')
+    camera_info_topic: str = parameter('', 'Intrinsics of the colour image; empty: '
+                                           '<camera namespace>/<camera>/camera_info.')
+    world_frame: str = parameter('world', 'Frame objects are reported in. The camera\'s pose is looked up on tf: '
+                                          'the images\' frame in this frame at the images\' stamp.')
+
+    def topic(self, kind: str) -> str:
+        """The topic of the camera's `kind` ('color', 'depth', 'camera_info')."""
+        return getattr(self, f'{kind}_topic') or f'{GraphNames.CAMERA_NAMESPACE}/{self.camera}/{kind}'
 
     def validate(self) -> None:
         if self.source not in SOURCES:
@@ -45,8 +44,5 @@ class PerceptionConfig:
             raise ValueError('parameter stub_file is required when source=stub')
         if self.detector not in (known := detector_names()):
             raise ValueError(f'parameter detector={self.detector!r} is not one of {", ".join(known)}')
-        if self.camera_moves and not self.camera_pose_from_topic:
-            raise ValueError('a moving camera (camera_moves) needs camera_pose_from_topic: its pose comes with '
-                             'each frame')
-        if len(self.camera_position) != 3 or len(self.camera_orientation) != 4:
-            raise ValueError('camera_position needs x, y, z and camera_orientation x, y, z, w')
+        if not self.world_frame:
+            raise ValueError('parameter world_frame names no frame')

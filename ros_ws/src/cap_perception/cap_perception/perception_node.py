@@ -1,8 +1,10 @@
 """perception_node: the object services of the graph over one interchangeable source.
 
 The `source` parameter chooses where objects come from: `ground_truth` (the simulator's object array), `rgbd` (a
-colour detector on one camera's colour and depth images, run on the newest frame when a service is asked: the table
-domain's, the `detector` parameter: cap_perception.detectors) or `stub` (a YAML file).
+colour detector on one camera's colour and depth images, run on the newest frame when a service is asked: the
+domain's, the `detector` parameter: cap_perception.detectors) or `stub` (a YAML file). With `rgbd`, the camera's pose
+comes from tf: the pose of the images' frame (their header's frame_id) in `world_frame` at the images' stamp, so a
+camera on a calibrated mount (a static transform) and one that moves with the robot work the same way.
 """
 from __future__ import annotations
 
@@ -13,17 +15,16 @@ import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from geometry_msgs.msg import PoseStamped
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-from scipy.spatial.transform import Rotation
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
 from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 from cap_ros_common.parameters import declare_config
+from cap_ros_common.tf import TfListener
+from cap_ros_common.transforms import TransformError
 from cap_ros_common.time import time_msg, to_seconds
-from cap_perception.camera_poses import CameraPoses
 from cap_perception.config import PerceptionConfig
 from cap_perception.detectors import get_detector
 from cap_perception.rgbd import CameraView, same_view
@@ -33,25 +34,6 @@ from cap_perception.sources import (CameraMemory, NoObservationError, SnapshotSo
 
 # Only the latest object array matters: keep one, reliably delivered.
 OBJECTS_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
-# The camera's pose is latched (a late joiner gets it); a moving camera's comes with every frame, and the images
-# queued behind it need theirs: keep several.
-POSE_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def _nanoseconds(stamp) -> int:
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
-def _pose_matrix(position, orientation_xyzw) -> np.ndarray:
-    if not np.all(np.isfinite([*position, *orientation_xyzw])):
-        raise ValueError('a position or orientation value is not a finite number')
-    pose = np.eye(4)
-    pose[:3, :3] = Rotation.from_quat(orientation_xyzw).as_matrix()
-    pose[:3, 3] = position
-    return pose
-
-
 class PerceptionNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('perception_node', **kwargs)
@@ -85,42 +67,30 @@ class PerceptionNode(Node):
     # ------------------------------------------------------------------------------------------ RGB-D detector
     def _start_detector(self) -> None:
         config = self.config
-        camera, use_pose_topic = config.camera, config.camera_pose_from_topic
         self._detect = get_detector(config.detector)
-        self._poses = CameraPoses(moving=config.camera_moves)
-        if not use_pose_topic:
-            self._poses.add(0, _pose_matrix(config.camera_position, config.camera_orientation))
         self._memory = CameraMemory(self.source, analyse=self._analyse)
         self._last_analysis: tuple[CameraView, list] | None = None  # only touched inside CameraMemory.refresh
         self._frames_lock = threading.Lock()
         self._color: Image | None = None
         self._depth: Image | None = None
+        self._waiting_for_pose = False  # the newest frame's pose has not come on tf yet
         # When each image reached this process (local wall clock, ns): not the sender's clock, which may differ.
         self._color_received_ns = self._depth_received_ns = 0
         self._camera_matrix: np.ndarray | None = None
-        prefix = f'{GraphNames.CAMERA_NAMESPACE}/{camera}'
         # Images are sensor data: the latest frame matters, a lost one is replaced by the next.
         images = MutuallyExclusiveCallbackGroup()
+        self._tf = TfListener(self, callback_group=images, on_update=self._on_transforms)
         # With the message info: a frame received before a forget shows the old scene (see CameraMemory).
-        self.create_subscription(Image, f'{prefix}/color', lambda m, info: self._on_image('color', m, info),
+        self.create_subscription(Image, config.topic('color'), lambda m, info: self._on_image('color', m, info),
                                  qos_profile_sensor_data, callback_group=images)
-        self.create_subscription(Image, f'{prefix}/depth', lambda m, info: self._on_image('depth', m, info),
+        self.create_subscription(Image, config.topic('depth'), lambda m, info: self._on_image('depth', m, info),
                                  qos_profile_sensor_data, callback_group=images)
-        self.create_subscription(CameraInfo, f'{prefix}/camera_info', self._on_camera_info,
+        self.create_subscription(CameraInfo, config.topic('camera_info'), self._on_camera_info,
                                  qos_profile_sensor_data, callback_group=images)
-        if use_pose_topic:
-            self.create_subscription(PoseStamped, f'{prefix}/pose', self._on_camera_pose, POSE_QOS,
-                                     callback_group=images)
 
-    def _on_camera_pose(self, msg: PoseStamped) -> None:
-        p, q = msg.pose.position, msg.pose.orientation
-        try:
-            pose = _pose_matrix([p.x, p.y, p.z], [q.x, q.y, q.z, q.w])
-        except ValueError as error:  # a zero or non-finite quaternion: drop the message, keep serving
-            self.get_logger().error(f'ignoring a camera pose that is not a pose: {error}', throttle_duration_sec=5.0)
-            return
-        self._poses.add(_nanoseconds(msg.header.stamp), pose)
-        self._offer_frame()  # a moving camera's frame may have come before its pose
+    def _on_transforms(self) -> None:
+        if self._waiting_for_pose:  # a frame may have come before the transform of its stamp
+            self._offer_frame()
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
         self._camera_matrix = np.array(msg.k, dtype=float).reshape(3, 3)
@@ -132,22 +102,29 @@ class PerceptionNode(Node):
         self._offer_frame()
 
     def _offer_frame(self) -> None:
-        """Offer the newest colour and depth pair with its camera pose, to be analysed when somebody asks."""
+        """Offer the newest colour and depth pair with the camera's pose at its stamp, to be analysed when somebody
+        asks; a frame whose pose is not known yet waits for it (a moving camera's is exactly the frame's)."""
         with self._frames_lock:
             color, depth = self._color, self._depth
             received_ns = min(self._color_received_ns, self._depth_received_ns)
         # Colour and depth of one frame carry the same stamp.
         if color is None or depth is None or color.header.stamp != depth.header.stamp:
             return
-        pose = self._poses.at(_nanoseconds(color.header.stamp))
-        if pose is not None:
-            self._memory.offer((color, depth, pose), to_seconds(color.header.stamp), received_ns or None)
-        elif self._poses.newest_stamp() > _nanoseconds(color.header.stamp):
-            # Poses of later frames came but not this frame's: the poses carry other stamps than the images.
-            self.get_logger().warning(
-                f'no camera pose stamped as the frame at {to_seconds(color.header.stamp):.3f} s, but later ones; '
-                'a moving camera\'s frames are analysed with the pose of their own stamp only',
-                throttle_duration_sec=10.0)
+        stamp, frame = to_seconds(color.header.stamp), color.header.frame_id
+        try:
+            pose = self._tf.buffer.lookup(self.config.world_frame, frame, stamp)
+        except TransformError as error:
+            self._waiting_for_pose = True
+            try:
+                later = self._tf.buffer.latest_stamp(self.config.world_frame, frame)
+            except TransformError:
+                later = None
+            if later is not None and later > stamp:  # transforms of later moments came but not this frame's
+                self.get_logger().warning(f'no camera pose for the frame at {stamp:.3f} s: {error}',
+                                          throttle_duration_sec=10.0)
+            return
+        self._waiting_for_pose = False
+        self._memory.offer((color, depth, pose), stamp, received_ns or None)
 
     def _analyse(self, frame: tuple[Image, Image, np.ndarray]) -> list | None:
         """The objects in one colour and depth pair seen from `pose` (None when it cannot be analysed yet or at all).

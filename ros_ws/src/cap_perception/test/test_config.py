@@ -17,15 +17,14 @@ def test_yaml_overrides_only_declared_parameters():
 
 def test_defaults_are_the_simulated_top_camera():
     config = PerceptionConfig()
-    assert config.camera == 'top'
-    assert config.camera_position == (0.0, -0.5, 0.85)
-    assert config.camera_orientation == (1.0, 0.0, 0.0, 0.0)
+    assert config.camera == 'top' and config.world_frame == 'world'
+    assert config.topic('color') == 'cap/sim/cameras/top/color'
+    assert PerceptionConfig(depth_topic='/camera/depth/image_rect_raw').topic('depth') == '/camera/depth/image_rect_raw'
     config.validate()
 
 
-@pytest.mark.parametrize('changes', [{'source': 'sonar'}, {'source': 'stub'}, {'camera_position': (0.0, 1.0)},
-                                     {'detector': 'sonar'},
-                                     {'camera_moves': True, 'camera_pose_from_topic': False}])
+@pytest.mark.parametrize('changes', [{'source': 'sonar'}, {'source': 'stub'}, {'world_frame': ''},
+                                     {'detector': 'sonar'}])
 def test_invalid_configs_are_refused(changes):
     with pytest.raises(ValueError):
         PerceptionConfig(**changes).validate()

@@ -82,53 +82,62 @@ def test_unknown_source_is_refused_at_start(ros_context):
 
 
 def test_a_moving_cameras_frame_is_analysed_with_the_pose_stamped_as_the_frame(ros_context, graph, spin_until):
-    """The head camera moves with the base: a frame waits for the pose of its own stamp, which may come after its
-    images, and is never analysed with the latest pose of another moment (here: where the base started)."""
+    """The head camera moves with the base: a frame waits for the transform of its own stamp (odom -> base_link on
+    /tf), which may come after its images, and is never analysed with the latest pose of another moment (here:
+    where the base started)."""
     import math
 
     from cap_mobile import layout, robot
+    from cap_ros_common.tf import TfBroadcaster
+    from cap_ros_common.transforms import Transform, translation_rotation
     from cap_sim_bridge import ros_conversions as conv
-    from cap_sim_bridge.bridge_node import IMAGE_QOS, LATCHED_QOS
+    from cap_sim_bridge.bridge_node import IMAGE_QOS
     from cap_sim_bridge.world import World
-    from geometry_msgs.msg import PoseStamped
     from sensor_msgs.msg import CameraInfo, Image
 
     world = World('mobile', seed=1)
-    start_pose = world.camera_pose(robot.HEAD_CAMERA)
+    parent, mount = world.camera_mount(robot.HEAD_CAMERA)
+    start = world.base_pose()
     end = world.follow_base_trajectory([8.0], [list(layout.location('table').approach())])  # a straight drive
     world.run_for(end - world.time + 0.5)
     rgb, depth = world.render(robot.HEAD_CAMERA, 640, 480)
     seen = {s.name: s.position for s in world.object_states() if s.visible}
     assert len(seen) >= 2
 
+    def base(stamp, pose):  # world -> base_link, as map -> odom -> base_link says it in the simulator
+        x, y, yaw = pose
+        return Transform('world', 'base_link', stamp, (x, y, 0.0), (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)))
+
     add, executor = graph
     add(PerceptionNode(context=ros_context, parameter_overrides=[
         Parameter('source', value='rgbd'), Parameter('detector', value='mobile'),
-        Parameter('camera', value=robot.HEAD_CAMERA), Parameter('camera_moves', value=True)]))
+        Parameter('camera', value=robot.HEAD_CAMERA)]))
     camera = add(Node('head_camera', context=ros_context))
+    tf = TfBroadcaster(camera)
+    from cap_sim_bridge.robot_state import RobotState
+    from cap_sim_bridge.urdf import robot_urdf
+    tf.send_static([*RobotState(robot_urdf(world.model)).fixed_transforms(),
+                    Transform(parent, conv.optical_frame_id(robot.HEAD_CAMERA), 0.0, *translation_rotation(mount))])
     prefix = f'{GraphNames.CAMERA_NAMESPACE}/{robot.HEAD_CAMERA}'
     publishers = {kind: camera.create_publisher(kind_type, f'{prefix}/{kind}', qos) for kind, kind_type, qos in (
-        ('pose', PoseStamped, LATCHED_QOS), ('color', Image, IMAGE_QOS), ('depth', Image, IMAGE_QOS),
-        ('camera_info', CameraInfo, IMAGE_QOS))}
+        ('color', Image, IMAGE_QOS), ('depth', Image, IMAGE_QOS), ('camera_info', CameraInfo, IMAGE_QOS))}
     names = camera.create_client(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE)
     state = camera.create_client(GetObjectState, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE)
     assert spin_until(executor, lambda: all(p.get_subscription_count() == 1 for p in publishers.values()))
 
-    publishers['pose'].publish(conv.pose_stamped_msg(1.0, start_pose))  # the latest pose, of an earlier moment
+    tf.send([base(1.0, start)])  # the latest transform, of an earlier moment
     intrinsics = world.camera_intrinsics(robot.HEAD_CAMERA, 640, 480)
     publishers['camera_info'].publish(conv.camera_info_msg(2.0, robot.HEAD_CAMERA, intrinsics))
     publishers['color'].publish(conv.color_image_msg(2.0, robot.HEAD_CAMERA, rgb))
     publishers['depth'].publish(conv.depth_image_msg(2.0, robot.HEAD_CAMERA, depth))
     executor.spin_once(timeout_sec=0.5)
     assert _call(executor, spin_until, names, GetObjectNames.Request()).names == [], 'analysed without its pose'
-    broken = conv.pose_stamped_msg(2.0, world.camera_pose(robot.HEAD_CAMERA))
-    broken.pose.orientation.x = broken.pose.orientation.y = broken.pose.orientation.z = 0.0
-    broken.pose.orientation.w = 0.0
-    publishers['pose'].publish(broken)  # not a rotation: dropped with an error, the node serves on
-    executor.spin_once(timeout_sec=0.5)
+    broken = base(2.0, world.base_pose())
+    tf.send([Transform(broken.parent, broken.child, 2.0, broken.translation, (0.0, 0.0, 0.0, 0.0))])
+    executor.spin_once(timeout_sec=0.5)  # not a rotation: dropped, the node serves on
     assert _call(executor, spin_until, names, GetObjectNames.Request()).names == [], 'analysed with a broken pose'
 
-    publishers['pose'].publish(conv.pose_stamped_msg(2.0, world.camera_pose(robot.HEAD_CAMERA)))
+    tf.send([base(2.0, world.base_pose())])
     assert spin_until(executor, lambda: _call(executor, spin_until, names, GetObjectNames.Request()).names
                       == sorted(seen))
     for name, position in seen.items():

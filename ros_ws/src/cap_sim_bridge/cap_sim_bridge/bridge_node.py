@@ -3,8 +3,12 @@ driver and the cameras.
 
 Publishes /clock (simulated time), /joint_states (the arm, the fingers and the scene's own joints: a cart-pole's, the
 whiteboard tool's sprung slides, a mobile base's x, y and yaw), the ground-truth object array, per camera
-<CAMERA_NAMESPACE>/<camera>/{color, depth, camera_info, pose} (a camera is rendered only while somebody subscribes
-to its colour or depth images, and depth only for a depth subscriber), and in a scene with a whiteboard its ink
+<CAMERA_NAMESPACE>/<camera>/{color, depth, camera_info} (a camera is rendered only while somebody subscribes
+to its colour or depth images, and depth only for a depth subscriber), on /tf_static each camera's optical frame
+(REP-103: +z forward, +y down) on the body it is fixed to, and in a scene with a mobile base map -> odom (identity:
+the simulator knows where the base is) on /tf_static and odom -> base_link (the base joints' values) on /tf with
+every joint state and every frame of a camera the base carries, as a base driver and a localisation would; the
+robot's own links are robot_state's (robot_state_node.py). In a scene with a whiteboard it publishes its ink
 (SIM_INK_TOPIC when it changes, at most `ink_rate` times a second of simulated time, and a PNG from
 SIM_GET_INK_SERVICE); serves the scene reset, a
 FollowJointTrajectory action and a GripperCommand action (and in a scene with a mobile base, a FollowJointTrajectory
@@ -25,8 +29,9 @@ QoS, chosen on purpose:
   a reliable publisher also serves best-effort subscribers);
 - images, depth, camera_info: reliable, keep last 1: any subscriber (default or sensor-data QoS) receives them,
   and keep-last 1 hands a slow subscriber the newest frame instead of a backlog;
-- ground-truth objects, camera poses and the whiteboard's ink: reliable, transient local, keep last 1: a node that
-  starts later gets the current scene, the camera extrinsics and the ink at once.
+- ground-truth objects and the whiteboard's ink: reliable, transient local, keep last 1: a node that starts later
+  gets the current scene and the ink at once;
+- /tf and /tf_static: tf2's (cap_ros_common.qos).
 """
 from __future__ import annotations
 
@@ -43,7 +48,6 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 from trajectory_msgs.msg import JointTrajectoryPoint
@@ -54,6 +58,8 @@ from cap_interfaces.srv import ControlStep, GetInk, PushTool, ResetScene
 from cap_ros_common.actions import RESULT_TIMEOUT_S
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.qos import LATCHED_QOS
+from cap_ros_common.tf import TfBroadcaster
+from cap_ros_common.transforms import Transform, translation_rotation
 from cap_ros_common.time import duration_msg, time_msg
 from cap_sim_bridge import ros_conversions as conv
 from cap_sim_bridge import trajectory_goal
@@ -62,6 +68,7 @@ from cap_sim_bridge.rest import RestWatch
 from cap_sim_bridge.config import SimBridgeConfig, cameras_to_publish
 from cap_sim_bridge.lockstep import Lockstep
 from cap_sim_bridge.mobile_base import BASE_JOINT_NAMES
+from cap_sim_bridge.urdf import BASE_LINK
 from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES, World
 
 STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -129,8 +136,11 @@ class SimBridgeNode(Node):
                 'color': self.create_publisher(Image, camera_topic(camera, 'color'), IMAGE_QOS),
                 'depth': self.create_publisher(Image, camera_topic(camera, 'depth'), IMAGE_QOS),
                 'camera_info': self.create_publisher(CameraInfo, camera_topic(camera, 'camera_info'), IMAGE_QOS),
-                'pose': self.create_publisher(PoseStamped, camera_topic(camera, 'pose'), LATCHED_QOS),
             } for camera in self._cameras}
+        self._tf = TfBroadcaster(self)
+        self._tf.send_static(self._static_transforms())
+        # A camera the base carries: each of its frames is sent with odom -> base_link at the frame's stamp.
+        self._moving_cameras = {camera for camera in self._cameras if self.world.camera_moves(camera)}
 
         callbacks = ReentrantCallbackGroup()
         self.create_service(ResetScene, GraphNames.SIM_RESET_SERVICE, self._on_reset, callback_group=callbacks)
@@ -222,11 +232,16 @@ class SimBridgeNode(Node):
                     world.step(steps)
                     now = world.time
                     joints = self._joint_states(now) if publish_state else None
+                    base = self._base_transform(now) if world.base is not None else None
                     objects = world.object_states() if now >= next_objects and objects_rate > 0 and \
                         wall - last_objects_wall >= 1.0 / MAX_WALL_OBJECTS_RATE else None
+                base_sent = False
                 if joints is not None:
                     self._clock_pub.publish(Clock(clock=time_msg(now)))
                     self._joint_pub.publish(joints)
+                    if base is not None:
+                        self._tf.send([base])
+                        base_sent = True
                     last_state_wall = wall
                 if objects is not None:
                     self._objects_pub.publish(ObjectArray(header=conv.header(now),
@@ -242,6 +257,8 @@ class SimBridgeNode(Node):
                     idle_frames = None
                 if camera_rate > 0 and self._camera_rate > 0 and self._cameras and now >= next_camera:
                     watched = self._watched_cameras()
+                    if base is not None and not base_sent and any(c in self._moving_cameras for c, _ in watched):
+                        self._tf.send([base])  # the frames' stamp: a moving camera's pose at it is known exactly
                     if idle:  # nothing in view moves: render once, then send that frame with new stamps
                         if idle_frames is None or idle_frames[0] != watched:
                             idle_frames = (watched, self._render_frames(now, watched))
@@ -265,6 +282,27 @@ class SimBridgeNode(Node):
             # Otherwise the process is shutting down (e.g. SIGTERM) and publishing failed: nothing to report.
         finally:
             world.close()
+
+    def _static_transforms(self) -> list[Transform]:
+        """What /tf_static says for this scene: each published camera's optical frame on its body, and with a mobile
+        base map -> odom, both the world (the simulator localises perfectly)."""
+        transforms = []
+        if self.world.base is not None:
+            identity = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+            transforms += [Transform(conv.WORLD_FRAME, conv.MAP_FRAME, 0.0, *identity),
+                           Transform(conv.MAP_FRAME, conv.ODOM_FRAME, 0.0, *identity)]
+        for camera in self._cameras:
+            mount = self.world.camera_mount(camera)
+            if mount is not None:
+                transforms.append(Transform(mount[0], conv.optical_frame_id(camera), 0.0,
+                                            *translation_rotation(mount[1])))
+        return transforms
+
+    def _base_transform(self, now: float) -> Transform:
+        """odom -> base_link now: the base joints' x, y and yaw (call with world.lock held)."""
+        x, y, yaw = self.world.base_pose()
+        return Transform(conv.ODOM_FRAME, BASE_LINK, now, (float(x), float(y), 0.0),
+                         (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)))
 
     def _joint_states(self, now: float) -> JointState:
         """The arm's, the fingers' and the scene's own joints (call with world.lock held)."""
@@ -344,40 +382,36 @@ class SimBridgeNode(Node):
         return tuple(watched)
 
     def _render_frames(self, now: float, watched: tuple[tuple[str, bool], ...]) -> list[tuple[Any, ...]]:
-        """(publishers, colour, depth or None, camera_info, pose or None) of the `watched` cameras, rendered now; the
-        pose of a camera that moves (on the mobile base) comes with each frame."""
+        """(publishers, colour, depth or None, camera_info) of the `watched` cameras, rendered now."""
         width, height = self._image_width, self._image_height
         frames = []
         for camera, with_depth in watched:
             publishers = self._camera_pubs[camera]
-            pose = conv.pose_stamped_msg(now, self.world.camera_pose(camera)) if self.world.camera_moves(camera) \
-                else None
             rgb, depth = self.world.render(camera, width, height, with_depth=with_depth)
             frames.append((publishers, conv.color_image_msg(now, camera, rgb),
                            conv.depth_image_msg(now, camera, depth) if depth is not None else None,
-                           conv.camera_info_msg(now, camera, self.world.camera_intrinsics(camera, width, height)),
-                           pose))
+                           conv.camera_info_msg(now, camera, self.world.camera_intrinsics(camera, width, height))))
         return frames
 
     @staticmethod
     def _send_frames(frames: list[tuple[Any, ...]], now: float) -> None:
         stamp = time_msg(now)
-        for publishers, color, depth, info, pose in frames:
-            for kind, message in (('pose', pose), ('color', color), ('depth', depth), ('camera_info', info)):
+        for publishers, color, depth, info in frames:
+            for kind, message in (('color', color), ('depth', depth), ('camera_info', info)):
                 if message is not None:
                     message.header.stamp = stamp
                     publishers[kind].publish(message)
 
     def _publish_scene(self) -> None:
-        """Ground truth and camera poses now (after start and after every reset)."""
+        """Ground truth now (after start and after every reset), and where a reset put the base."""
         with self.world.lock:
             now = self.world.time
             states = self.world.object_states()
-            poses = {camera: self.world.camera_pose(camera) for camera in self._cameras}
+            base = self._base_transform(now) if self.world.base is not None else None
         self._objects_pub.publish(ObjectArray(header=conv.header(now),
                                               objects=[conv.object_state_msg(s) for s in states]))
-        for camera, pose in poses.items():
-            self._camera_pubs[camera]['pose'].publish(conv.pose_stamped_msg(now, pose))
+        if base is not None:
+            self._tf.send([base])
 
     # ----------------------------------------------------------------------------------------------- ink
     def _on_get_ink(self, request: GetInk.Request, response: GetInk.Response) -> GetInk.Response:

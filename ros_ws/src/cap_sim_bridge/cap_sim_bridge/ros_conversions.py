@@ -17,6 +17,9 @@ from cap_sim_bridge.objects import ObjectSpec
 from cap_sim_bridge.world import ObjectState
 
 WORLD_FRAME = 'world'
+# REP-105's frames of a mobile base: the map, the odometry's origin (both the world in the simulator).
+MAP_FRAME = 'map'
+ODOM_FRAME = 'odom'
 
 
 def optical_frame_id(camera: str) -> str:

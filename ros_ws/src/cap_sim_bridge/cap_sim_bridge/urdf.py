@@ -6,6 +6,11 @@ geoms and Euler angles) from the robot's root body down: each body becomes a lin
 (its joint's origin), a hinge a revolute joint, a slide a prismatic one, a body without a joint a fixed joint; the
 primitive geoms become visuals and collisions (a capsule as a cylinder with two spheres, URDF having no capsule),
 the bodies' inertia their inertials. Joint names are the model's, so /joint_states drives the URDF as it is.
+
+A fixed robot hangs from the `world` link where the model puts it. A mobile one (a root body with the planar joints
+of a mobile base: x, y and a yaw about the base's centre) hangs from `base_link`, the base's centre on the floor
+(REP-105): its pose in `odom` is the base joints' values, which the simulator sends as the transform
+odom -> base_link, as a base driver does; the planar joints are not in the URDF.
 Plain Python and MuJoCo, no ROS.
 """
 from __future__ import annotations
@@ -19,6 +24,7 @@ import numpy as np
 
 ROOT_BODY = 'base'  # the robot's first body in ur5e_gripper.xml
 WORLD_LINK = 'world'  # the frame every cap-ros pose is given in (markers, perception, the robot base)
+BASE_LINK = 'base_link'  # a mobile robot's base frame: its centre on the floor, x forward (REP-105)
 _NAME = mujoco.mjtObj
 # The model's type fields are NumPy integers, which MuJoCo's enum members do not compare equal to.
 _BOX, _SPHERE, _CYLINDER, _CAPSULE = (int(kind) for kind in (
@@ -106,10 +112,18 @@ def _link(model: mujoco.MjModel, body: int, name: str) -> ElementTree.Element:
     return link
 
 
-def _joints(model: mujoco.MjModel, body: int, parent_link: str, child_link: str) -> list[ElementTree.Element]:
-    """The URDF joints that connect `child_link` to `parent_link`: one for a body with no joint (fixed) or one joint;
-    for a body with several (a mobile base's x, y and yaw), a chain through a massless link per joint, each joint
-    placed where MuJoCo puts it (a hinge's `pos` off the body frame included) and the body fixed after the last."""
+def _fixed(name: str, parent: str, child: str, position: Sequence[float],
+           quaternion: Sequence[float]) -> ElementTree.Element:
+    joint = ElementTree.Element('joint', name=name, type='fixed')
+    _origin(joint, position, quaternion)
+    ElementTree.SubElement(joint, 'parent', link=parent)
+    ElementTree.SubElement(joint, 'child', link=child)
+    return joint
+
+
+def _joint(model: mujoco.MjModel, body: int, parent_link: str, child_link: str) -> ElementTree.Element:
+    """The URDF joint that connects `child_link` to `parent_link`: fixed for a body without a joint, else its one
+    hinge (revolute) or slide (prismatic) at the joint's place in the body."""
     if body == model.body_rootid[body] or model.body_parentid[body] == 0:  # the root: where the model puts it
         data = mujoco.MjData(model)
         mujoco.mj_kinematics(model, data)
@@ -118,64 +132,56 @@ def _joints(model: mujoco.MjModel, body: int, parent_link: str, child_link: str)
         position, quaternion = model.body_pos[body], model.body_quat[body]
     count = int(model.body_jntnum[body])
     if count == 0:
-        joint = ElementTree.Element('joint', name=f'{parent_link}_to_{child_link}', type='fixed')
-        _origin(joint, position, quaternion)
-        ElementTree.SubElement(joint, 'parent', link=parent_link)
-        ElementTree.SubElement(joint, 'child', link=child_link)
-        return [joint]
-    elements, parent, offset = [], parent_link, np.zeros(3)  # offset: the previous joint's pos in the body frame
-    for number in range(count):
-        index = model.body_jntadr[body] + number
-        kind = int(model.jnt_type[index])
-        name = mujoco.mj_id2name(model, _NAME.mjOBJ_JOINT, index)
-        if kind not in (_HINGE, _SLIDE):
-            raise ValueError(f'the joint {name!r} of body {child_link!r} is neither a hinge nor a slide')
-        last = number == count - 1
-        link = child_link if last and not np.any(np.abs(model.jnt_pos[index]) > 1e-9) else f'{child_link}_{name}'
-        # An unlimited hinge (a mobile base's yaw, which counts whole turns) is a continuous joint.
-        joint_type = 'prismatic' if kind == _SLIDE else 'revolute' if model.jnt_limited[index] else 'continuous'
-        joint = ElementTree.Element('joint', name=name, type=joint_type)
-        pos = np.asarray(model.jnt_pos[index], dtype=float)
-        if number == 0:  # the body's pose, then the joint's place in the body frame
-            rotation = np.zeros(9)
-            mujoco.mju_quat2Mat(rotation, np.asarray(quaternion, dtype=float))
-            _origin(joint, np.asarray(position) + rotation.reshape(3, 3) @ pos, quaternion)
-        else:  # the frames of one body's joints share its orientation
-            _origin(joint, pos - offset, (1.0, 0.0, 0.0, 0.0))
-        offset = pos
-        ElementTree.SubElement(joint, 'parent', link=parent)
-        ElementTree.SubElement(joint, 'child', link=link)
-        ElementTree.SubElement(joint, 'axis', xyz=_numbers(model.jnt_axis[index]))
-        if kind == _SLIDE and not model.jnt_limited[index]:
-            low, high = -100.0, 100.0  # URDF wants limits; an unlimited slide (a mobile base) gets a room's worth
-        else:
-            low, high = model.jnt_range[index] if model.jnt_limited[index] else (-2 * math.pi, 2 * math.pi)
-        actuator_force = [model.actuator_forcerange[a][1] for a in range(model.nu)
-                          if model.actuator_trntype[a] == _JOINT_TRANSMISSION and model.actuator_trnid[a][0] == index
-                          and model.actuator_forcelimited[a]]
-        ElementTree.SubElement(joint, 'limit', lower=f'{low:.6g}', upper=f'{high:.6g}',
-                               effort=f'{(actuator_force or [100.0])[0]:.6g}', velocity=f'{math.pi:.6g}')
-        elements.append(joint)
-        if link != child_link:
-            elements.append(ElementTree.Element('link', name=link))
-            if last:  # the body itself, back from the last joint's place to the body frame
-                fixed = ElementTree.Element('joint', name=f'{link}_to_{child_link}', type='fixed')
-                _origin(fixed, -pos, (1.0, 0.0, 0.0, 0.0))
-                ElementTree.SubElement(fixed, 'parent', link=link)
-                ElementTree.SubElement(fixed, 'child', link=child_link)
-                elements.append(fixed)
-        parent = link
-    return elements
+        return _fixed(f'{parent_link}_to_{child_link}', parent_link, child_link, position, quaternion)
+    index = model.body_jntadr[body]
+    name = mujoco.mj_id2name(model, _NAME.mjOBJ_JOINT, index)
+    kind = int(model.jnt_type[index])
+    if count > 1 or kind not in (_HINGE, _SLIDE) or np.any(np.abs(model.jnt_pos[index]) > 1e-9):
+        raise ValueError(f'body {child_link!r}: only one hinge or slide at the body frame is written as URDF')
+    joint = ElementTree.Element('joint', name=name, type='prismatic' if kind == _SLIDE else 'revolute')
+    _origin(joint, position, quaternion)
+    ElementTree.SubElement(joint, 'parent', link=parent_link)
+    ElementTree.SubElement(joint, 'child', link=child_link)
+    ElementTree.SubElement(joint, 'axis', xyz=_numbers(model.jnt_axis[index]))
+    low, high = model.jnt_range[index] if model.jnt_limited[index] else (-2 * math.pi, 2 * math.pi)
+    actuator_force = [model.actuator_forcerange[a][1] for a in range(model.nu)
+                      if model.actuator_trntype[a] == _JOINT_TRANSMISSION and model.actuator_trnid[a][0] == index
+                      and model.actuator_forcelimited[a]]
+    ElementTree.SubElement(joint, 'limit', lower=f'{low:.6g}', upper=f'{high:.6g}',
+                           effort=f'{(actuator_force or [100.0])[0]:.6g}', velocity=f'{math.pi:.6g}')
+    return joint
+
+
+def _mobile_mount(model: mujoco.MjModel, root: int, child_link: str) -> ElementTree.Element:
+    """base_link -> the root body, fixed: the root body's pose with the base's joints at zero (the base's centre at
+    the origin, facing +x), where base_link is."""
+    data = mujoco.MjData(model)
+    for number in range(int(model.body_jntnum[root])):
+        data.qpos[model.jnt_qposadr[model.body_jntadr[root] + number]] = 0.0
+    mujoco.mj_kinematics(model, data)
+    return _fixed(f'{BASE_LINK}_to_{child_link}', BASE_LINK, child_link, data.xpos[root], data.xquat[root])
+
+
+def base_joint_names(model: mujoco.MjModel, root_body: str = ROOT_BODY) -> tuple[str, ...]:
+    """The mobile base's planar joints on the robot's root body (x, y, yaw), or () for a fixed robot."""
+    root = mujoco.mj_name2id(model, _NAME.mjOBJ_BODY, root_body)
+    count = int(model.body_jntnum[root]) if root >= 0 else 0
+    if count < 2:
+        return ()
+    return tuple(mujoco.mj_id2name(model, _NAME.mjOBJ_JOINT, model.body_jntadr[root] + number)
+                 for number in range(count))
 
 
 def robot_urdf(model: mujoco.MjModel, root_body: str = ROOT_BODY, robot_name: str = 'ur5e_gripper') -> str:
-    """The URDF of the bodies under `root_body` (itself included), fixed in the `world` link where the model puts it."""
+    """The URDF of the bodies under `root_body` (itself included): fixed in the `world` link where the model puts
+    it, or, for a mobile robot (base joints on the root body), on `base_link`."""
     root = mujoco.mj_name2id(model, _NAME.mjOBJ_BODY, root_body)
     if root < 0:
         raise ValueError(f'the model has no body {root_body!r}')
+    mobile = bool(base_joint_names(model, root_body))
     robot = ElementTree.Element('robot', name=robot_name)
     robot.append(ElementTree.Comment(' Written by cap_sim_bridge.urdf from the MuJoCo model the simulator runs. '))
-    robot.append(ElementTree.Element('link', name=WORLD_LINK))
+    robot.append(ElementTree.Element('link', name=BASE_LINK if mobile else WORLD_LINK))
     names = {}
     for body in range(root, model.nbody):
         parent = model.body_parentid[body]
@@ -184,9 +190,12 @@ def robot_urdf(model: mujoco.MjModel, root_body: str = ROOT_BODY, robot_name: st
         name = mujoco.mj_id2name(model, _NAME.mjOBJ_BODY, body) or f'body{body}'
         names[body] = name
         robot.append(_link(model, body, name))
-        robot.extend(_joints(model, body, WORLD_LINK if body == root else names[parent], name))
+        if body == root and mobile:
+            robot.append(_mobile_mount(model, root, name))
+        else:
+            robot.append(_joint(model, body, WORLD_LINK if body == root else names[parent], name))
     ElementTree.indent(robot)
     return '<?xml version="1.0"?>\n' + ElementTree.tostring(robot, encoding='unicode') + '\n'
 
 
-__all__ = ['ROOT_BODY', 'WORLD_LINK', 'robot_urdf', 'rpy_of_quaternion']
+__all__ = ['BASE_LINK', 'ROOT_BODY', 'WORLD_LINK', 'base_joint_names', 'robot_urdf', 'rpy_of_quaternion']

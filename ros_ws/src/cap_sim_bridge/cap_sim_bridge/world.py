@@ -717,6 +717,21 @@ class World:
             model = self.model
             return bool(model.body_weldid[model.cam_bodyid[model.camera(camera).id]] != 0)
 
+    def camera_mount(self, camera: str) -> tuple[str, np.ndarray] | None:
+        """(the body the named camera is fixed to, 'world' for the world body; 4x4 pose of its ROS optical frame in
+        that body's frame), constant while the model stays: what a camera's static transform says. None for a
+        camera that is not fixed to a body (one that tracks the robot from afar)."""
+        with self.lock:
+            model = self.model
+            index = model.camera(camera).id
+            if model.cam_mode[index] != mujoco.mjtCamLight.mjCAMLIGHT_FIXED:
+                return None
+            body = int(model.cam_bodyid[index])
+            body_pose = np.eye(4)
+            body_pose[:3, :3], body_pose[:3, 3] = self.data.xmat[body].reshape(3, 3), self.data.xpos[body]
+            parent = 'world' if body == 0 else mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body)
+            return parent, np.linalg.inv(body_pose) @ self.camera_pose(camera)
+
     def camera_pose(self, camera: str) -> np.ndarray:
         """4x4 world_T_optical of the named camera (ROS optical frame: +z forward, +y down, +x right)."""
         with self.lock:
