@@ -14,8 +14,7 @@ def _perception(**options) -> dict:
 
 def test_rgbd_perception_of_the_mobile_domain_runs_the_kitchens_detector_on_the_moving_head_camera():
     parameters = _perception(domain='mobile', perception='rgbd')
-    assert parameters == {'source': 'rgbd', 'detector': 'mobile', 'camera': robot.HEAD_CAMERA,
-                          'camera_moves': True}
+    assert parameters == {'source': 'rgbd', 'detector': 'mobile', 'camera': robot.HEAD_CAMERA}
     PerceptionConfig(**parameters).validate()
     assert _perception(domain='mobile') == {'source': 'ground_truth'}
 
@@ -23,7 +22,7 @@ def test_rgbd_perception_of_the_mobile_domain_runs_the_kitchens_detector_on_the_
 def test_rgbd_perception_of_the_table_top_keeps_the_defaults_the_table_tops_detector_and_top_camera():
     assert _perception(perception='rgbd') == {'source': 'rgbd'}
     config = PerceptionConfig(source='rgbd')
-    assert (config.detector, config.camera, config.camera_moves) == ('tabletop', 'top', False)
+    assert (config.detector, config.camera, config.world_frame) == ('tabletop', 'top', 'world')
 
 
 def test_rgbd_perception_without_camera_images_is_refused():

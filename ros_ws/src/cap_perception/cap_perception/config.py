@@ -21,7 +21,7 @@ class PerceptionConfig:
     detector: str = parameter('tabletop', 'Which domain\'s detector the rgbd source runs (cap_perception.detectors): '
                                           'tabletop (the blocks and bowls on the table, best from the top camera), '
                                           'mobile (the kitchen\'s objects on its furniture, from the mobile base\'s '
-                                          'head camera: camera head, camera_moves true), or another package\'s.')
+                                          'head camera: camera head), or another package\'s.')
     camera: str = parameter(DEFAULT_CAMERA, 'Camera whose images the detector reads: the topics '
                                             '<camera namespace>/<camera>/{color,depth,camera_info} unless the '
                                             'three topic parameters below name others.')

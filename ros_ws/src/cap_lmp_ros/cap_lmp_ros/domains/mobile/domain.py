@@ -32,4 +32,4 @@ DOMAIN = Domain(name='mobile', build_engine=build_engine, robot_functions=ROBOT_
                 scene='mobile', cassette=Path(__file__).resolve().parent / 'cassettes' / 'mobile_reference.yaml',
                 nodes=(PERCEPTION_NODE, NAVIGATION_NODE, MOBILE_PICK_PLACE_NODE), query_functions=QUERY_FUNCTIONS,
                 # The kitchen's detector on the head camera, which moves with the base.
-                rgbd_perception=(('detector', 'mobile'), ('camera', robot.HEAD_CAMERA), ('camera_moves', True)))
+                rgbd_perception=(('detector', 'mobile'), ('camera', robot.HEAD_CAMERA)))
