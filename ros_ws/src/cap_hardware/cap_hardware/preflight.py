@@ -85,5 +85,5 @@ def problems(profile: HardwareProfile, actions: Mapping[str, Sequence[str]], top
     return found
 
 
-__all__ = ['CAMERA_INFO', 'FOLLOW_JOINT_TRAJECTORY', 'GRIPPER_COMMAND', 'IMAGE', 'JOINT_STATE', 'NAVIGATE_THROUGH_POSES',
-           'NAVIGATE_TO_POSE', 'OCCUPANCY_GRID', 'Requirement', 'problems', 'requirements']
+__all__ = ['CAMERA_INFO', 'FOLLOW_JOINT_TRAJECTORY', 'GRIPPER_COMMAND', 'IMAGE', 'JOINT_STATE',
+           'NAVIGATE_THROUGH_POSES', 'NAVIGATE_TO_POSE', 'OCCUPANCY_GRID', 'Requirement', 'problems', 'requirements']

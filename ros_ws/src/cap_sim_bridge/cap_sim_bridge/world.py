@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
-from typing import Sequence
+from typing import Callable, Sequence
 
 import mujoco
 import numpy as np
@@ -97,9 +97,13 @@ class World:
     """The table-top simulation. See the module docstring for the threading rule."""
 
     def __init__(self, scene_name: str = scenes.DEFAULT_SCENE, seed: int = 0,
-                 objects: Sequence[ObjectSpec | str] | None = None) -> None:
-        """scene_name: a registered scene (ValueError naming the known ones otherwise); it must contain the robot."""
+                 objects: Sequence[ObjectSpec | str] | None = None,
+                 adjust_model: Callable[[mujoco.MjModel], None] | None = None) -> None:
+        """scene_name: a registered scene (ValueError naming the known ones otherwise); it must contain the robot.
+        adjust_model(model): changes every model compiled for a reset before it is used (a hardware stand-in's
+        perturbations, cap_sim_bridge.standin)."""
         self.lock = threading.RLock()
+        self._adjust_model = adjust_model
         self.scene_name = scene_name
         self.scene = scenes.get_scene(scene_name)
         self._models: dict[tuple, mujoco.MjModel] = {}
@@ -139,6 +143,8 @@ class World:
             model = self._models.get(key)
             if model is None:
                 model = self.scene.build(specs).compile()
+                if self._adjust_model is not None:
+                    self._adjust_model(model)
                 # A few compiled models are kept: benchmarks and tests reset the same objects again and again.
                 if len(self._models) >= 8:
                     self._models.pop(next(iter(self._models)))
