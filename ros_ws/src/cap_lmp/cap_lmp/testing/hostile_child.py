@@ -38,7 +38,7 @@ def main() -> None:
     data.recv_bytes()  # setup
     if mode == 'never_ready':
         half_a_message()
-    send({'op': 'ready', 'default_lmp': 'tabletop_ui'})
+    send({'op': 'ready', 'default_lmp': 'toy_ui'})
     data.recv_bytes()  # run
     if mode == 'half_message':
         half_a_message()
@@ -72,7 +72,7 @@ def main() -> None:
     elif mode == 'asks_the_model_badly':  # malformed model requests, then one asking for a day of model time
         replies = []
         for request in ({'lmp': 'x', 'prompt': 7}, {'lmp': 'x', 'prompt': 'p' * (2 * 10 ** 6)}, 'not a request',
-                        {'lmp': 'tabletop_ui', 'prompt': '# the blocks.\n', 'query': 'the blocks',
+                        {'lmp': 'toy_ui', 'prompt': '# the blocks.\n', 'query': 'the blocks',
                          'time_budget_s': 86400.0}):
             send({'op': 'complete', 'id': len(replies) + 1, 'request': request})
             replies.append(json.loads(data.recv_bytes()))

@@ -56,6 +56,18 @@ def last_query_line(prompt: str) -> str:
     return ''
 
 
+def by_attempt(answers: Mapping[str, tuple[str, str]]) -> Callable[[RecordedRequest], str | None]:
+    """A responder: for a query containing a key, the first answer when asked at temperature 0, the second when
+    sampled (a request with a seed: the engine asking again after an answer that could not run)."""
+    def respond(request: RecordedRequest) -> str | None:
+        query = last_query_line(request.prompt)
+        for key, (first, sampled) in answers.items():
+            if key in query:
+                return sampled if request.body.get('seed') is not None else first
+        return None
+    return respond
+
+
 class ScriptedOpenAIServer:
     """See the module docstring. `answers` maps a substring of the query line to the completion text; the longest
     matching key wins. `responder(request) -> str | None` may be given instead or in addition."""

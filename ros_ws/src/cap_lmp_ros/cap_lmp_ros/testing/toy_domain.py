@@ -1,30 +1,18 @@
-"""A toy robot domain for tests: one LMP and one robot function, `ring_bell(times)`, whose ROS binding publishes
-std_msgs/String 'ring x<times>' on the relative topic `toy/bell`. It shows what a domain needs, and that lmp_node
-runs any registered domain. No rclpy at import: the sandbox process imports this module to build its engine."""
+"""The toy domain over ROS, for tests: its one ROS robot function, `ring_bell(times)`, publishes std_msgs/String
+'ring x<times>' on the relative topic `toy/bell`; the prompts, LMPs and engine builder are cap_lmp's toy domain
+(cap_lmp.testing.toy_domain). It shows what a domain needs, and that lmp_node runs any registered domain. No rclpy at
+import: the sandbox process imports this module to build its engine."""
 from __future__ import annotations
 
 import threading
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable
 
-from cap_lmp.engine import Engine, LMPConfig
-from cap_lmp.llm import LLMClient
-from cap_lmp.sandbox import SandboxLimits
+from cap_lmp.testing.toy_domain import TOY_PROMPT, build_engine
+from cap_lmp.testing.toy_world import bell_rings
 from cap_lmp_ros.domains.registry import Domain
 
 BELL_TOPIC = 'toy/bell'
-TOY_PROMPT = '''# ring the bell once.
-ring_bell(1)
-# ring the bell three times.
-ring_bell(3)
-'''
-
-
-def build_engine(api: Mapping[str, Callable[..., Any]], client: LLMClient, limits: SandboxLimits | None = None,
-                 **engine_options: Any) -> Engine:
-    """An Engine with the one toy LMP over `api`."""
-    toy_ui = LMPConfig('toy_ui', TOY_PROMPT, stop=('#',), maintain_session=True)
-    return Engine([toy_ui], client, dict(api), limits=limits, default_lmp='toy_ui', **engine_options)
 
 
 class RosToyApi:
@@ -45,9 +33,7 @@ class RosToyApi:
 
     def ring_bell(self, times: int) -> None:
         """Ring the bell `times` times (1 to 10)."""
-        if not isinstance(times, int) or isinstance(times, bool) or not 1 <= times <= 10:
-            raise ValueError('ring_bell(times) takes a whole number from 1 to 10')
-        self._bell.publish(self._string(data=f'ring x{times}'))
+        self._bell.publish(self._string(data=f'ring x{bell_rings(times)}'))
 
     def stop(self) -> None:
         self.stop_requested.set()
@@ -57,3 +43,6 @@ def toy_domain(cassette: Path, name: str = 'toy') -> Domain:
     """The toy domain, replaying `cassette` when lmp_node is given none."""
     return Domain(name=name, build_engine=build_engine, robot_functions=('ring_bell',), robot_api=RosToyApi,
                   scene='toy', cassette=Path(cassette))
+
+
+__all__ = ['BELL_TOPIC', 'TOY_PROMPT', 'RosToyApi', 'build_engine', 'toy_domain']

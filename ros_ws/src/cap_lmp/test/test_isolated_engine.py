@@ -1,7 +1,7 @@
 """IsolatedEngine: the session runs in a sandbox process, the robot stays here.
 
 The model is a real HTTP server on 127.0.0.1, asked by the node's side for the sandbox process (which sends its
-requests as messages); the robot is the in-memory table, called through the message channel. The C-level
+requests as messages); the robot is the toy domain's world in memory, called through the message channel. The C-level
 pathologies the in-process sandbox cannot bound (see sandbox.py, "What it does not guarantee") end the sandbox
 process here, never the host.
 """
@@ -18,11 +18,11 @@ import pytest
 from cap_lmp import wire
 from cap_lmp.engine import CODE, DONE, EXECUTING, GENERATING
 from cap_lmp.isolated_engine import IsolatedEngine
-from cap_lmp_ros.domains.tabletop.lmps import build_engine
 from cap_lmp.llm import OpenAICompatibleClient
 from cap_lmp.sandbox import SandboxLimits
 from cap_lmp.testing.openai_server import ScriptedOpenAIServer
-from cap_lmp_ros.testing.table import Table
+from cap_lmp.testing.toy_domain import build_engine
+from cap_lmp.testing.toy_world import ToyWorld
 
 SCENE = {'red block': (-0.1, -0.4), 'blue block': (0.1, -0.45), 'red bowl': (-0.15, -0.65)}
 PROGRAMS = {
@@ -53,38 +53,38 @@ def server():
 
 
 @pytest.fixture
-def table() -> Table:
-    return Table.with_objects(SCENE)
+def world() -> ToyWorld:
+    return ToyWorld.with_objects(SCENE)
 
 
 @pytest.fixture
-def engine(server, table):
+def engine(server, world):
     client = OpenAICompatibleClient(server.base_url, 'scripted-model', timeout_s=10.0)
-    isolated = IsolatedEngine(build_engine, table.api(), client,
+    isolated = IsolatedEngine(build_engine, world.api(), client,
                               SandboxLimits(time_limit_s=60.0), stall_limit_s=2.0,
                               address_space_extra_bytes=400 << 20)
     yield isolated
     isolated.close()
 
 
-def test_robot_calls_cross_the_boundary_and_the_session_keeps_variables(engine, table):
+def test_robot_calls_cross_the_boundary_and_the_session_keeps_variables(engine, world):
     events = []
     engine.add_listener(events.append)
     first = engine.run('put the red block in the red bowl')
     assert first.success, first.message
-    assert np.allclose(table.get_obj_pos('red block'), SCENE['red bowl'])
-    assert [(e.stage, e.lmp) for e in events] == [(GENERATING, 'tabletop_ui'), (CODE, 'tabletop_ui'),
-                                                   (EXECUTING, 'tabletop_ui'), (DONE, 'tabletop_ui')]
+    assert np.allclose(world.get_obj_pos('red block'), SCENE['red bowl'])
+    assert [(e.stage, e.lmp) for e in events] == [(GENERATING, 'toy_ui'), (CODE, 'toy_ui'), (EXECUTING, 'toy_ui'),
+                                                   (DONE, 'toy_ui')]
     second = engine.run('say where it went')  # `where` is an ndarray that lives in the sandbox process
     assert second.success, second.message
-    assert table.said == ['[-0.15 -0.65]', '[-0.3 -1.3]']
+    assert world.said == ['[-0.15 -0.65]', '[-0.3 -1.3]']
     assert engine.pid != os.getpid()
 
 
-def test_a_nested_lmp_call_runs_in_the_sandbox_process(engine, table):
+def test_a_nested_lmp_call_runs_in_the_sandbox_process(engine, world):
     result = engine.run('ask the blocks')
     assert result.success, result.message
-    assert table.said == ["['red block', 'blue block']"] and result.model_calls == 2
+    assert world.said == ["['red block', 'blue block']"] and result.model_calls == 2
 
 
 def test_robot_errors_reach_the_program_with_their_message(engine):
@@ -97,8 +97,8 @@ def test_robot_errors_reach_the_program_with_their_message(engine):
     assert engine.run('put the red block in the red bowl').success
 
 
-def test_an_endless_loop_is_stopped_by_the_sandbox_and_the_process_stays(server, table):
-    quick = IsolatedEngine(build_engine, table.api(), OpenAICompatibleClient(server.base_url, 'scripted-model'),
+def test_an_endless_loop_is_stopped_by_the_sandbox_and_the_process_stays(server, world):
+    quick = IsolatedEngine(build_engine, world.api(), OpenAICompatibleClient(server.base_url, 'scripted-model'),
                            SandboxLimits(time_limit_s=1.0))
     try:
         pid = quick.pid
@@ -126,7 +126,7 @@ def test_running_out_of_address_space_is_a_memory_error_of_the_program(engine):
     assert engine.run('put the red block in the red bowl').success
 
 
-def test_a_c_stack_overflow_costs_the_session_not_the_host(engine, table):
+def test_a_c_stack_overflow_costs_the_session_not_the_host(engine, world):
     assert engine.run('put the red block in the red bowl').success
     pid = engine.pid
     crashed = engine.run('crash the interpreter')

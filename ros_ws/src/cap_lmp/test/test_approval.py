@@ -1,6 +1,7 @@
 """Approval before a program runs (cap_lmp/approval.py): a plan-only run lists what the program would do, nothing
-moves until the gate says yes, and a rejection, a cancel or a failed plan leaves the table and the session as they
-were. In this process and across the sandbox process, against a real OpenAI-protocol server on 127.0.0.1."""
+moves until the gate says yes, and a rejection, a cancel or a failed plan leaves the world and the session as they
+were. Over the toy domain (its acting functions are recorded, its query functions read the world), in this process
+and across the sandbox process, against a real OpenAI-protocol server on 127.0.0.1."""
 from __future__ import annotations
 
 import threading
@@ -16,8 +17,8 @@ from cap_lmp.llm import OpenAICompatibleClient
 from cap_lmp.outcome import Outcome
 from cap_lmp.sandbox import SandboxLimits
 from cap_lmp.testing.openai_server import ScriptedOpenAIServer
-from cap_lmp_ros.domains.tabletop.lmps import build_engine
-from cap_lmp_ros.testing.table import Table
+from cap_lmp.testing.toy_domain import ACTING_FUNCTIONS, build_engine
+from cap_lmp.testing.toy_world import ToyWorld
 
 SCENE = {'red block': (-0.1, -0.4), 'blue block': (0.1, -0.45), 'red bowl': (-0.15, -0.65),
          'blue bowl': (0.15, -0.3)}
@@ -29,11 +30,10 @@ PROGRAMS = {
         "say('done sorting')\n"
         "sorted_count = len(names)"),
     '# the blocks.': "ret_val = [name for name in objects if 'block' in name]",
-    'move the red block to the middle': "put_first_on_second('red block', denormalize_xy([0.5, 0.5]))",
+    'move the red block to the middle': "put_first_on_second('red block', np.array([0.0, -0.5]))",
     'move the purple block': "put_first_on_second('red block', 'red bowl')\nget_obj_pos('purple block')",
     'dance forever': "while True:\n    put_first_on_second('red block', 'red bowl')",
 }
-PLAN_FUNCTIONS = ('put_first_on_second', 'say')
 
 
 @pytest.fixture
@@ -43,15 +43,15 @@ def server():
 
 
 @pytest.fixture
-def table() -> Table:
-    return Table.with_objects(SCENE)
+def world() -> ToyWorld:
+    return ToyWorld.with_objects(SCENE)
 
 
 class Gate:
-    """An approval gate that records what it was shown and what the table looked like then, and answers as told."""
+    """An approval gate that records what it was shown and what the world looked like then, and answers as told."""
 
-    def __init__(self, table: Table, answer: str = 'approve') -> None:
-        self.table, self.answer = table, answer
+    def __init__(self, world: ToyWorld, answer: str = 'approve') -> None:
+        self.world, self.answer = world, answer
         self.shown: list[tuple[str, list[PlannedCall]]] = []
         self.moves_when_asked: list[int] = []
         self.asked = threading.Event()
@@ -59,7 +59,7 @@ class Gate:
 
     def __call__(self, code: str, plan: list[PlannedCall]) -> None:
         self.shown.append((code, plan))
-        self.moves_when_asked.append(len(self.table.moves))
+        self.moves_when_asked.append(len(self.world.moves))
         self.asked.set()
         if self.answer == 'wait':
             self.release.wait(10.0)
@@ -68,24 +68,24 @@ class Gate:
             raise NotApproved('rejected by the operator: not that one; nothing ran', 'rejected')
 
 
-def _engine(server: ScriptedOpenAIServer, table: Table, isolated: bool):
+def _engine(server: ScriptedOpenAIServer, world: ToyWorld, isolated: bool):
     client = OpenAICompatibleClient(server.base_url, 'scripted-model', timeout_s=10.0)
-    options = {'plan_functions': list(PLAN_FUNCTIONS)}
+    options = {'plan_functions': list(ACTING_FUNCTIONS)}
     if isolated:
-        return IsolatedEngine(build_engine, table.api(), client, SandboxLimits(time_limit_s=5.0),
+        return IsolatedEngine(build_engine, world.api(), client, SandboxLimits(time_limit_s=5.0),
                               engine_options=options, address_space_extra_bytes=400 << 20)
-    return build_engine(table.api(), client, SandboxLimits(time_limit_s=5.0), **options)
+    return build_engine(world.api(), client, SandboxLimits(time_limit_s=5.0), **options)
 
 
 @pytest.fixture(params=['in process', 'sandbox process'])
-def engine(request, server, table):
-    built = _engine(server, table, request.param == 'sandbox process')
+def engine(request, server, world):
+    built = _engine(server, world, request.param == 'sandbox process')
     yield built
     built.close()
 
 
-def test_an_approved_program_runs_what_its_plan_showed_after_the_gate(engine, server, table):
-    gate = Gate(table)
+def test_an_approved_program_runs_what_its_plan_showed_after_the_gate(engine, server, world):
+    gate = Gate(world)
     engine.approval = gate
     events = []
     engine.add_listener(events.append)
@@ -97,36 +97,36 @@ def test_an_approved_program_runs_what_its_plan_showed_after_the_gate(engine, se
         ('put_first_on_second', ('red block', 'red bowl')), ('put_first_on_second', ('blue block', 'blue bowl')),
         ('say', ('done sorting',))]
     assert gate.moves_when_asked == [0]  # nothing moved before the approval
-    assert table.moves == [('red block', 'red bowl'), ('blue block', 'blue bowl')]
-    assert table.said == ['done sorting']  # said once, when it ran, not while it was planned
+    assert world.moves == [('red block', 'red bowl'), ('blue block', 'blue bowl')]
+    assert world.said == ['done sorting']  # said once, when it ran, not while it was planned
     nested = [r for r in server.requests if r.prompt.rstrip().endswith('# the blocks.')]
     assert len(nested) == 1  # the nested LMP's planned answer is the one that ran
-    stages = [event.stage for event in events if event.lmp == 'tabletop_ui']
+    stages = [event.stage for event in events if event.lmp == 'toy_ui']
     assert stages.index(CODE) < stages.index(EXECUTING)
 
 
-def test_a_rejected_program_moves_nothing_and_leaves_the_session_as_it_was(engine, table):
-    engine.approval = Gate(table, 'reject')
+def test_a_rejected_program_moves_nothing_and_leaves_the_session_as_it_was(engine, world):
+    engine.approval = Gate(world, 'reject')
     result = engine.run('put the blocks in the bowls of their colour')
     assert result.outcome is Outcome.REFUSED and not result.success
     assert 'rejected by the operator: not that one' in result.message
-    assert table.moves == [] and table.said == []
+    assert world.moves == [] and world.said == []
     engine.approval = None
     after = engine.run('say sorted_count')  # the plan-only run bound it in a copy of the scope only
     assert not after.success and 'sorted_count' in after.message
 
 
-def test_a_failing_plan_is_reported_before_anything_moves(engine, table):
-    gate = Gate(table)
+def test_a_failing_plan_is_reported_before_anything_moves(engine, world):
+    gate = Gate(world)
     engine.approval = gate
     result = engine.run('move the purple block')
     assert result.outcome is Outcome.ERROR
     assert 'the plan-only run failed, so nothing moved' in result.message and 'purple block' in result.message
-    assert gate.shown == [] and table.moves == []
+    assert gate.shown == [] and world.moves == []
 
 
-def test_a_point_target_is_planned_as_plain_numbers(engine, table):
-    gate = Gate(table)
+def test_a_point_target_is_planned_as_plain_numbers(engine, world):
+    gate = Gate(world)
     engine.approval = gate
     assert engine.run('move the red block to the middle').success
     (call,) = gate.shown[0][1]
@@ -134,8 +134,8 @@ def test_a_point_target_is_planned_as_plain_numbers(engine, table):
     assert all(isinstance(value, float) for value in call.args[1])
 
 
-def test_a_cancel_while_waiting_for_approval_cancels_the_command(engine, table):
-    gate = Gate(table, 'wait')
+def test_a_cancel_while_waiting_for_approval_cancels_the_command(engine, world):
+    gate = Gate(world, 'wait')
     engine.approval = gate
     box = {}
     worker = threading.Thread(target=lambda: box.update(result=engine.run('move the red block to the middle')))
@@ -144,13 +144,13 @@ def test_a_cancel_while_waiting_for_approval_cancels_the_command(engine, table):
     engine.cancel()
     gate.release.set()  # a gate that says yes after the cancel (too late): the program still does not run
     worker.join(10.0)
-    assert box['result'].outcome is Outcome.CANCELLED and table.moves == []
+    assert box['result'].outcome is Outcome.CANCELLED and world.moves == []
 
 
-def test_a_program_with_too_many_actions_is_not_planned(engine, table):
-    engine.approval = Gate(table)
+def test_a_program_with_too_many_actions_is_not_planned(engine, world):
+    engine.approval = Gate(world)
     result = engine.run('dance forever')
-    assert not result.success and 'more than 200 robot actions' in result.message and table.moves == []
+    assert not result.success and 'more than 200 robot actions' in result.message and world.moves == []
 
 
 def test_plain_values_and_the_wire_form_of_a_planned_call():
@@ -162,20 +162,3 @@ def test_plain_values_and_the_wire_form_of_a_planned_call():
     for bad in ({'function': 'os.system'}, {'function': 'f', 'args': 'x'}, ['f'], {'function': 3}):
         with pytest.raises(ValueError):
             planned_call(bad)
-
-
-def test_the_table_top_says_what_each_planned_call_does():
-    from cap_lmp_ros.domains.tabletop.plan import describe_call
-    from cap_lmp_ros.plan_steps import plan_summary
-
-    named = describe_call(PlannedCall('put_first_on_second', (['the Red block'], 'blue bowl')))
-    assert (named.object_name, named.target_name, named.description) == (
-        'red block', 'blue bowl', 'put the red block on the blue bowl')
-    point = describe_call(PlannedCall('put_first_on_second', ('red block',), {'target': [0.1, -0.5]}))
-    assert point.points == ((0.1, -0.5, 0.0),) and point.description == 'put the red block at (0.100, -0.500)'
-    odd = describe_call(PlannedCall('put_first_on_second', ('red block', '<object>')))
-    assert odd.target_name == '<object>'  # text the program passed is kept as text (the page shows it as text)
-    assert describe_call(PlannedCall('wave', (3,))).description == 'wave(3)'
-    assert plan_summary([named, point]) == ('1. put the red block on the blue bowl; '
-                                            '2. put the red block at (0.100, -0.500)')
-    assert plan_summary([]) == 'the plan-only run found no robot action'

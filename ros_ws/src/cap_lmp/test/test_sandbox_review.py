@@ -16,6 +16,8 @@ from cap_lmp.llm import Completion
 from cap_lmp.sandbox import Sandbox
 from cap_lmp.testing.attack_programs import DISABLE_TRACING
 from cap_lmp.testing.sandbox_programs import TEST_LIMITS as LIMITS, run_program as run
+from cap_lmp.testing.toy_domain import build_engine
+from cap_lmp.testing.toy_world import ToyWorld
 
 
 @pytest.fixture(scope='module')
@@ -172,11 +174,8 @@ class _ScriptedClient:
 
 def test_engine_bounds_the_message_of_a_programs_exception():
     """The engine formats the program's exception after the watchdog has ended: the text must be bounded."""
-    from cap_lmp_ros.domains.tabletop.lmps import build_engine
-    from cap_lmp_ros.testing.table import Table
-    engine = build_engine(Table.with_objects({'red block': (0, -0.5)}).api(),
-                                   _ScriptedClient(['row = [0] * 10 ** 6\nraise ValueError([row] * 20)']),
-                                   limits=LIMITS)
+    engine = build_engine(ToyWorld.with_objects({'red block': (0, -0.5)}).api(),
+                          _ScriptedClient(['row = [0] * 10 ** 6\nraise ValueError([row] * 20)']), limits=LIMITS)
     result = engine.run('fail loudly')
     assert not result.success and len(result.message) < 20_000
 
@@ -185,8 +184,8 @@ _SESSION_CHILD = r'''
 import json
 from cap_lmp.llm import Completion
 from cap_lmp.sandbox import SandboxLimits
-from cap_lmp_ros.domains.tabletop.lmps import build_engine
-from cap_lmp_ros.testing.table import Table
+from cap_lmp.testing.toy_domain import build_engine
+from cap_lmp.testing.toy_world import ToyWorld
 
 class Client:
     def __init__(self, answers):
@@ -196,9 +195,8 @@ class Client:
         return Completion(text=self.answers.pop(0))
 
 keep = 'keep_{0} = [np.ones(2 * 10 ** 6) + i for i in range(6)]'
-engine = build_engine(Table.with_objects({'red block': (0, -0.5)}).api(),
-                               Client([keep.format(i) for i in range(4)]),
-                               limits=SandboxLimits(time_limit_s=5.0, max_memory_growth_bytes=256 << 20))
+engine = build_engine(ToyWorld.with_objects({'red block': (0, -0.5)}).api(), Client([keep.format(i) for i in range(4)]),
+                      limits=SandboxLimits(time_limit_s=5.0, max_memory_growth_bytes=256 << 20))
 results = [engine.run(f'keep {i}') for i in range(4)]
 print(json.dumps([[r.success, r.stop_reason, r.message] for r in results]))
 '''
@@ -288,10 +286,8 @@ r = [0] * np.int64(3)
 
 
 def test_a_shadowed_api_name_is_restored_for_the_next_command():
-    from cap_lmp_ros.domains.tabletop.lmps import build_engine
-    from cap_lmp_ros.testing.table import Table
-    table = Table.with_objects({'red block': (0, -0.5)})
-    engine = build_engine(table.api(), _ScriptedClient([
+    world = ToyWorld.with_objects({'red block': (0, -0.5)})
+    engine = build_engine(world.api(), _ScriptedClient([
         'say = lambda text: None\nnp = None', "say('still here')\nx = np.zeros(2)"]), limits=LIMITS)
     first, second = engine.run('shadow'), engine.run('speak')
     assert first.success and second.success, (first.message, second.message)

@@ -1,8 +1,9 @@
 """The limits of a command, enforced by the node where the program cannot reach them (IsolatedEngine).
 
 Each attack program runs in a real sandbox process; the model is a real HTTP server on 127.0.0.1, asked by the node
-for the sandbox process; the robot is the in-memory table. Every test checks what a user notices: the command ended
-within the limit's margin, the message names the cause, and the next command in the same engine moves the block.
+for the sandbox process; the robot is the toy domain's world in memory. Every test checks what a user notices: the
+command ended within the limit's margin, the message names the cause, and the next command in the same engine moves
+the block.
 """
 from __future__ import annotations
 
@@ -15,12 +16,12 @@ from cap_lmp.cassette import Cassette, CassetteClient
 from cap_lmp.engine import check_program_size
 from cap_lmp.errors import CodeRejected
 from cap_lmp.isolated_engine import IsolatedEngine
-from cap_lmp_ros.domains.tabletop.lmps import build_engine
 from cap_lmp.llm import OpenAICompatibleClient
 from cap_lmp.sandbox import SandboxLimits
-from cap_lmp.testing.openai_server import ScriptedOpenAIServer, ScriptedReply
-from cap_lmp_ros.testing.table import Table
 from cap_lmp.testing.attack_programs import MOVE, PROGRAMS, SCENE, TIME_ATTACKS
+from cap_lmp.testing.openai_server import ScriptedOpenAIServer, ScriptedReply
+from cap_lmp.testing.toy_domain import build_engine
+from cap_lmp.testing.toy_world import ToyWorld
 from cap_lmp.wire import MAX_PROGRAM_CHARS
 
 TIME_LIMIT_S = 2.0
@@ -33,34 +34,34 @@ def server():
 
 
 @pytest.fixture
-def table() -> Table:
-    return Table.with_objects(SCENE)
+def world() -> ToyWorld:
+    return ToyWorld.with_objects(SCENE)
 
 
-def make_engine(server, table, **options) -> IsolatedEngine:
+def make_engine(server, world, **options) -> IsolatedEngine:
     options = {'stall_limit_s': 30.0, 'model_time_limit_s': 30.0, 'address_space_extra_bytes': 700 << 20,
                **options}
     limits = options.pop('limits', SandboxLimits(time_limit_s=TIME_LIMIT_S, max_memory_growth_bytes=256 << 20))
     client = OpenAICompatibleClient(server.base_url, 'scripted-model', timeout_s=30.0, max_retries=0)
-    return IsolatedEngine(build_engine, table.api(), client, limits, **options)
+    return IsolatedEngine(build_engine, world.api(), client, limits, **options)
 
 
 @pytest.fixture
-def engine(server, table):
-    isolated = make_engine(server, table)
+def engine(server, world):
+    isolated = make_engine(server, world)
     yield isolated
     isolated.close()
 
 
-def assert_next_command_moves_the_block(engine: IsolatedEngine, table: Table) -> None:
-    table.put_first_on_second('red block', SCENE['red block'])
+def assert_next_command_moves_the_block(engine: IsolatedEngine, world: ToyWorld) -> None:
+    world.put_first_on_second('red block', SCENE['red block'])
     result = engine.run(MOVE)
     assert result.success, result.message
-    assert np.allclose(table.get_obj_pos('red block'), SCENE['red bowl'])
+    assert np.allclose(world.get_obj_pos('red block'), SCENE['red bowl'])
 
 
 @pytest.mark.parametrize('command', TIME_ATTACKS)
-def test_the_time_limit_holds_for_any_program(engine, table, command):
+def test_the_time_limit_holds_for_any_program(engine, world, command):
     started = time.monotonic()
     result = engine.run(command)
     elapsed = time.monotonic() - started
@@ -68,10 +69,10 @@ def test_the_time_limit_holds_for_any_program(engine, table, command):
     assert elapsed < TIME_LIMIT_S + 1.0, (elapsed, result.message)
     assert result.stop_reason in ('timeout', 'recursion'), result.message
     assert ('time limit' in result.message or 'nested calls deeper' in result.message), result.message
-    assert_next_command_moves_the_block(engine, table)
+    assert_next_command_moves_the_block(engine, world)
 
 
-def test_a_heartbeat_is_not_progress(engine, table):
+def test_a_heartbeat_is_not_progress(engine, world):
     """GEOS runs without the interpreter, so the heartbeat goes on: the deadline kills it all the same."""
     pid = engine.pid
     result = engine.run('GEOS without the interpreter: buffer of a 30,000-point line')
@@ -79,19 +80,19 @@ def test_a_heartbeat_is_not_progress(engine, table):
     assert f'time limit of {TIME_LIMIT_S:g} s' in result.message and 'session was lost' in result.message
     assert engine.pid != pid
     assert result.timings['total_s'] < TIME_LIMIT_S + 1.0  # the kill comes KILL_MARGIN_S after the limit
-    assert_next_command_moves_the_block(engine, table)
+    assert_next_command_moves_the_block(engine, world)
 
 
-def test_the_model_is_asked_by_the_node_and_its_time_is_reported(engine, table, server):
+def test_the_model_is_asked_by_the_node_and_its_time_is_reported(engine, world, server):
     result = engine.run('ask once')
     assert result.success, result.message
-    assert table.said == ["['red block', 'blue block']"]
+    assert world.said == ["['red block', 'blue block']"]
     assert len(server.requests) == 2 and result.model_calls == 2
     assert 0 < result.timings['model_s'] < result.timings['total_s']
 
 
-def test_a_slow_model_in_a_loop_meets_the_model_deadline(server, table):
-    engine = make_engine(server, table, model_time_limit_s=2.0)
+def test_a_slow_model_in_a_loop_meets_the_model_deadline(server, world):
+    engine = make_engine(server, world, model_time_limit_s=2.0)
     try:
         server.push(ScriptedReply(), *[ScriptedReply(delay_s=0.4) for _ in range(20)])
         started = time.monotonic()
@@ -102,40 +103,38 @@ def test_a_slow_model_in_a_loop_meets_the_model_deadline(server, table):
         assert 1.9 < result.timings['model_s'] < 3.0 and elapsed < 2.0 + TIME_LIMIT_S + 1.0
         assert engine.restarts == 0  # a friendly stop: the session stays
         server._queue.clear()
-        assert_next_command_moves_the_block(engine, table)
+        assert_next_command_moves_the_block(engine, world)
     finally:
         engine.close()
 
 
-def test_the_model_deadline_holds_in_process_too(server, table):
+def test_the_model_deadline_holds_in_process_too(server, world):
     """sandbox_process:=false: the engine gives each request the budget left, and stops the loop itself."""
-    from cap_lmp_ros.domains.tabletop.lmps import build_engine
-    engine = build_engine(table.api(), OpenAICompatibleClient(server.base_url, 'scripted-model',
-                                                                       max_retries=0),
-                                   SandboxLimits(time_limit_s=TIME_LIMIT_S), model_time_limit_s=2.0)
+    engine = build_engine(world.api(), OpenAICompatibleClient(server.base_url, 'scripted-model', max_retries=0),
+                          SandboxLimits(time_limit_s=TIME_LIMIT_S), model_time_limit_s=2.0)
     server.push(ScriptedReply(), *[ScriptedReply(delay_s=0.4) for _ in range(20)])
     started = time.monotonic()
     result = engine.run('ask forever')
     assert result.stop_reason == 'model_timeout' and 'model deadline of 2 s' in result.message, result.message
     assert time.monotonic() - started < 2.0 + TIME_LIMIT_S + 1.0
     server._queue.clear()
-    assert engine.run(MOVE).success and np.allclose(table.get_obj_pos('red block'), SCENE['red bowl'])
+    assert engine.run(MOVE).success and np.allclose(world.get_obj_pos('red block'), SCENE['red bowl'])
 
 
-def test_a_model_that_hangs_costs_the_model_deadline_only(server, table):
-    engine = make_engine(server, table, model_time_limit_s=2.0)
+def test_a_model_that_hangs_costs_the_model_deadline_only(server, world):
+    engine = make_engine(server, world, model_time_limit_s=2.0)
     try:
         server.push(ScriptedReply(delay_s=20.0))
         started = time.monotonic()
         result = engine.run(MOVE)
         assert not result.success and 'model deadline of 2 s' in result.message, result.message
         assert time.monotonic() - started < 2.0 + 1.5
-        assert_next_command_moves_the_block(engine, table)
+        assert_next_command_moves_the_block(engine, world)
     finally:
         engine.close()
 
 
-def test_cancel_while_the_model_is_asked_ends_within_the_grace(engine, table, server):
+def test_cancel_while_the_model_is_asked_ends_within_the_grace(engine, world, server):
     server.push(ScriptedReply(), ScriptedReply(delay_s=20.0))
     cancel = __import__('threading').Timer(0.5, engine.cancel)
     cancel.start()
@@ -144,23 +143,23 @@ def test_cancel_while_the_model_is_asked_ends_within_the_grace(engine, table, se
     cancel.join()
     assert not result.success and result.stop_reason == 'cancelled', result.message
     assert time.monotonic() - started < 0.5 + 2.0
-    assert_next_command_moves_the_block(engine, table)
+    assert_next_command_moves_the_block(engine, world)
 
 
-def test_the_cassette_records_in_the_node(server, table, tmp_path):
+def test_the_cassette_records_in_the_node(server, world, tmp_path):
     path = tmp_path / 'recorded.yaml'
     backend = OpenAICompatibleClient(server.base_url, 'scripted-model')
-    engine = IsolatedEngine(build_engine, table.api(), CassetteClient(path, mode='record', backend=backend),
+    engine = IsolatedEngine(build_engine, world.api(), CassetteClient(path, mode='record', backend=backend),
                             SandboxLimits(time_limit_s=TIME_LIMIT_S))
     try:
         assert engine.run(MOVE).success
     finally:
         engine.close()
     entries = Cassette.load(path).entries()
-    assert [(e.lmp, e.query) for e in entries] == [('tabletop_ui', MOVE)]
+    assert [(e.lmp, e.query) for e in entries] == [('toy_ui', MOVE)]
 
 
-def test_a_memory_limit_hit_costs_that_command_only(engine, table):
+def test_a_memory_limit_hit_costs_that_command_only(engine, world):
     assert engine.run('remember seven').success
     full = engine.run('keep filling the memory')
     assert not full.success and full.stop_reason == 'memory', full.message
@@ -168,25 +167,25 @@ def test_a_memory_limit_hit_costs_that_command_only(engine, table):
     again = engine.run('use 100 MB')  # the stopped command's 256 MiB are gone
     assert again.success, again.message
     recalled = engine.run('recall seven')  # the session's own variables stay
-    assert recalled.success and table.said[-1] == '7', recalled.message
+    assert recalled.success and world.said[-1] == '7', recalled.message
     assert engine.restarts == 0
-    assert_next_command_moves_the_block(engine, table)
+    assert_next_command_moves_the_block(engine, world)
 
 
-def test_the_address_space_cap_stays_and_the_next_command_works(engine, table):
+def test_the_address_space_cap_stays_and_the_next_command_works(engine, world):
     result = engine.run('fill the address space')
     assert not result.success
     assert result.error_type == 'MemoryError' or result.stop_reason == 'memory', result.message
     assert engine.run('use 100 MB').success
-    assert_next_command_moves_the_block(engine, table)
+    assert_next_command_moves_the_block(engine, world)
 
 
-def test_a_program_over_the_size_limit_is_refused_before_it_runs(engine, table):
+def test_a_program_over_the_size_limit_is_refused_before_it_runs(engine, world):
     result = engine.run('move in a long program')
     assert not result.success and result.error_type == 'CodeRejected', result.message
     assert f'{MAX_PROGRAM_CHARS:,} characters' in result.message and 'not run' in result.message
-    assert np.allclose(table.get_obj_pos('red block'), SCENE['red block'])  # nothing of it ran
-    assert_next_command_moves_the_block(engine, table)
+    assert np.allclose(world.get_obj_pos('red block'), SCENE['red block'])  # nothing of it ran
+    assert_next_command_moves_the_block(engine, world)
 
 
 def test_the_size_limit_is_one_constant():
@@ -255,13 +254,12 @@ EXCEPTIONS = {
 
 
 @pytest.mark.parametrize('isolated', [False, True], ids=['Engine', 'IsolatedEngine'])
-def test_an_enormous_exception_is_reported_bounded(table, isolated):
-    from cap_lmp_ros.domains.tabletop.lmps import build_engine
+def test_an_enormous_exception_is_reported_bounded(world, isolated):
     with ScriptedOpenAIServer({**EXCEPTIONS, MOVE: PROGRAMS[MOVE]}) as server:
         client = OpenAICompatibleClient(server.base_url, 'scripted-model', max_retries=0)
         limits = SandboxLimits(time_limit_s=TIME_LIMIT_S)
-        engine = (IsolatedEngine(build_engine, table.api(), client, limits) if isolated
-                  else build_engine(table.api(), client, limits))
+        engine = (IsolatedEngine(build_engine, world.api(), client, limits) if isolated
+                  else build_engine(world.api(), client, limits))
         try:
             for command in EXCEPTIONS:
                 started = time.monotonic()
@@ -272,16 +270,16 @@ def test_an_enormous_exception_is_reported_bounded(table, isolated):
                 assert 'line 1' in result.message or 'line 2' in result.message, result.message[:300]
             if isolated:
                 assert engine.restarts == 0
-            assert_next_command_moves_the_block(engine, table)
+            assert_next_command_moves_the_block(engine, world)
         finally:
             if isolated:
                 engine.close()
 
 
-def test_the_sandbox_process_holds_no_model_credentials(server, table, monkeypatch):
+def test_the_sandbox_process_holds_no_model_credentials(server, world, monkeypatch):
     monkeypatch.setenv('CAP_LLM_API_KEY', 'secret-key')
     monkeypatch.setenv('OPENAI_API_KEY', 'secret-key')
-    engine = make_engine(server, table)
+    engine = make_engine(server, world)
     try:
         with open(f'/proc/{engine.pid}/environ', 'rb') as environ:
             assert b'secret-key' not in environ.read()

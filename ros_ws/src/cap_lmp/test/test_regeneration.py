@@ -8,9 +8,9 @@ from cap_lmp.engine import GENERATING
 from cap_lmp.llm import OpenAICompatibleClient
 from cap_lmp.outcome import Outcome
 from cap_lmp.sandbox import SandboxLimits
-from cap_lmp.testing.openai_server import ScriptedOpenAIServer, last_query_line
-from cap_lmp_ros.domains.tabletop.lmps import build_engine
-from cap_lmp_ros.testing.table import Table
+from cap_lmp.testing.openai_server import ScriptedOpenAIServer, by_attempt
+from cap_lmp.testing.toy_domain import build_engine
+from cap_lmp.testing.toy_world import ToyWorld
 
 SCENE = {'red block': (-0.1, -0.4), 'blue block': (0.1, -0.45), 'red bowl': (-0.15, -0.65),
          'blue bowl': (0.15, -0.3)}
@@ -23,47 +23,36 @@ def server():
 
 
 @pytest.fixture
-def table() -> Table:
-    return Table.with_objects(SCENE)
+def world() -> ToyWorld:
+    return ToyWorld.with_objects(SCENE)
 
 
-def make_engine(server, table, **options):
+def make_engine(server, world, **options):
     client = OpenAICompatibleClient(server.base_url, model='scripted-model', api='completions', backoff_s=0.01,
                                     timeout_s=5.0)
-    return build_engine(table.api(), client, limits=SandboxLimits(time_limit_s=1.0), **options)
+    return build_engine(world.api(), client, limits=SandboxLimits(time_limit_s=1.0), **options)
 
 
-def by_attempt(answers: dict[str, tuple[str, str]]):
-    """A responder: for a query containing a key, the first answer at temperature 0, the second when sampled."""
-    def respond(request):
-        query = last_query_line(request.prompt)
-        for key, (first, sampled) in answers.items():
-            if key in query:
-                return sampled if request.body.get('seed') is not None else first
-        return None
-    return respond
-
-
-def test_a_name_nothing_defines_stops_the_command_before_anything_moves(server, table):
+def test_a_name_nothing_defines_stops_the_command_before_anything_moves(server, world):
     server.answers['put both blocks away'] = ("put_first_on_second('red block', 'red bowl')\n"
                                               "put_first_on_second('blue block', blue_target)")
-    result = make_engine(server, table).run('put both blocks away')
+    result = make_engine(server, world).run('put both blocks away')
     assert not result.success and result.outcome is Outcome.REFUSED and result.error_type == 'NameError'
     assert "name 'blue_target' is not defined (line 2 of the generated program" in result.message
     assert 'nothing ran' in result.message
-    assert table.moves == [] and np.allclose(table.get_obj_pos('red block'), SCENE['red block'])
+    assert world.moves == [] and np.allclose(world.get_obj_pos('red block'), SCENE['red block'])
     assert len(server.requests) == 1  # regenerations are off by default (the paper's engine)
 
 
-def test_an_answer_that_cannot_run_is_sampled_again_and_the_second_one_runs(server, table):
+def test_an_answer_that_cannot_run_is_sampled_again_and_the_second_one_runs(server, world):
     server.responder = by_attempt({'put the red block in its bowl': (
         "put_first_on_second('red block', red_bowl)", "put_first_on_second('red block', 'red bowl')")})
-    engine = make_engine(server, table, regenerations=1, regeneration_temperature=0.5)
+    engine = make_engine(server, world, regenerations=1, regeneration_temperature=0.5)
     events = []
     engine.add_listener(events.append)
     result = engine.run('put the red block in its bowl')
     assert result.success, result.message
-    assert np.allclose(table.get_obj_pos('red block'), SCENE['red bowl'])
+    assert np.allclose(world.get_obj_pos('red block'), SCENE['red bowl'])
     first, second = (request.body for request in server.requests)
     assert first['temperature'] == 0.0 and 'seed' not in first
     assert second['temperature'] == 0.5 and second['seed'] == 1
@@ -71,7 +60,7 @@ def test_an_answer_that_cannot_run_is_sampled_again_and_the_second_one_runs(serv
     assert result.model_calls == 2
 
 
-def test_a_nested_lmp_answer_is_asked_again_too(server, table):
+def test_a_nested_lmp_answer_is_asked_again_too(server, world):
     server.responder = by_attempt({
         'put the block nearest the blue bowl in it': (
             "name = parse_obj_name('the block nearest the blue bowl', f'objects = {get_obj_names()}')\n"
@@ -79,64 +68,40 @@ def test_a_nested_lmp_answer_is_asked_again_too(server, table):
         'the block nearest the blue bowl': (
             "ret_val = min(block_names, key=lambda n: np.linalg.norm(get_obj_pos(n) - get_obj_pos('blue bowl')))",
             "ret_val = 'blue block'")})
-    result = make_engine(server, table, regenerations=1).run('put the block nearest the blue bowl in it')
+    result = make_engine(server, world, regenerations=1).run('put the block nearest the blue bowl in it')
     assert result.success, result.message
-    assert table.moves == [('blue block', 'blue bowl')]
+    assert world.moves == [('blue block', 'blue bowl')]
 
 
-def test_refusals_and_answers_that_stay_unusable_are_final(server, table):
+def test_refusals_and_answers_that_stay_unusable_are_final(server, world):
     server.answers['look around'] = 'import os\nsay(os.getcwd())'
-    engine = make_engine(server, table, regenerations=2)
+    engine = make_engine(server, world, regenerations=2)
     refused = engine.run('look around')
     assert refused.outcome is Outcome.REFUSED and len(server.requests) == 1  # the sandbox's refusal is final
 
     server.answers['move it'] = "put_first_on_second('red block', somewhere)"
     broken = engine.run('move it')
     assert broken.error_type == 'NameError' and len(server.requests) == 1 + 3  # asked, then twice again
-    assert table.moves == []
+    assert world.moves == []
 
 
-def test_variables_passed_to_an_lmp_and_its_context_are_defined(server, table):
+def test_variables_passed_to_an_lmp_and_its_context_are_defined(server, world):
     server.answers.update({
         'make the square bigger': ("pts = np.array([[0, 0], [0.1, 0], [0.1, 0.1], [0, 0.1]])\n"
                                    "big = transform_shape_pts('scale it up by 2', shape_pts=pts)\n"
                                    "say(str(len(big)) + ' ' + str(len(objects)))"),
         'scale it up by 2': 'new_shape_pts = shape_pts * 2'})
-    result = make_engine(server, table).run('make the square bigger')
+    result = make_engine(server, world).run('make the square bigger')
     assert result.success, result.message
-    assert table.said == ['4 4']
+    assert world.said == ['4 4']
 
 
-def test_an_object_the_model_made_up_is_asked_for_again_before_anything_moves(server, table):
-    server.responder = by_attempt({'put the red block and the blue block in the blue bowl': (
-        "put_first_on_second('red block', 'blue bowl')\nput_first_on_second('green block', 'blue bowl')",
-        "put_first_on_second('red block', 'blue bowl')\nput_first_on_second('blue block', 'blue bowl')")})
-    engine = make_engine(server, table, regenerations=1)
-    result = engine.run('put the red block and the blue block in the blue bowl')
-    assert result.success, result.message
-    assert table.moves == [('red block', 'blue bowl'), ('blue block', 'blue bowl')]  # the first answer never ran
-
-    server.responder = None
-    server.answers['put the blue block on the red block'] = "put_first_on_second('green block', 'red block')"
-    made_up = engine.run('put the blue block on the red block')
-    assert made_up.outcome is Outcome.MODEL_ERROR and 'names the green block, which is neither on the table' in \
-        made_up.message
-    assert len(table.moves) == 2
-
-
-def test_an_object_the_command_names_is_the_users_and_the_program_runs(server, table):
-    server.answers['put the purple block in the red bowl'] = "put_first_on_second('purple block', 'red bowl')"
-    result = make_engine(server, table, regenerations=1).run('put the purple block in the red bowl')
-    assert result.outcome is Outcome.ERROR and "no object called 'purple block'" in result.message
-    assert len(server.requests) == 1
-
-
-def test_in_the_sandbox_process_the_second_answer_is_sampled_with_its_seed(server, table):
+def test_in_the_sandbox_process_the_second_answer_is_sampled_with_its_seed(server, world):
     from cap_lmp.isolated_engine import IsolatedEngine
     server.responder = by_attempt({'put the red block in its bowl': (
         "put_first_on_second('red block', red_bowl)", "put_first_on_second('red block', 'red bowl')")})
     client = OpenAICompatibleClient(server.base_url, 'scripted-model', api='completions', timeout_s=10.0)
-    engine = IsolatedEngine(build_engine, table.api(), client, SandboxLimits(time_limit_s=10.0),
+    engine = IsolatedEngine(build_engine, world.api(), client, SandboxLimits(time_limit_s=10.0),
                             engine_options={'regenerations': 1})
     try:
         result = engine.run('put the red block in its bowl')
@@ -144,4 +109,4 @@ def test_in_the_sandbox_process_the_second_answer_is_sampled_with_its_seed(serve
         engine.close()
     assert result.success, result.message
     assert [request.body.get('seed') for request in server.requests] == [None, 1]
-    assert table.moves == [('red block', 'red bowl')]
+    assert world.moves == [('red block', 'red bowl')]
