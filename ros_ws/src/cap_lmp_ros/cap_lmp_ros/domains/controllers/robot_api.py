@@ -177,7 +177,7 @@ class RosControllersApi:
         future.add_done_callback(lambda _: done.set())
         deadline = time.monotonic() + timeout_s
         cancelled = False
-        while not done.wait(0.01) and not future.done():  # done() too: see controller_node._wait
+        while not done.wait(0.01) and not future.done():  # done() too: see cap_control.controller.node._wait
             if self.stop_requested.is_set() and not cancelled:
                 if cancel is None:
                     future.cancel()
