@@ -13,7 +13,7 @@ import numpy as np
 from cap_control.kinematics import (
     HOME_JOINTS, forward_kinematics, inverse_kinematics, pose_error, top_down_pose, top_down_reach_margin,
 )
-from cap_control.pick_place import ObjectInfo, plan_pick_place
+from cap_control.pick_place.plan import ObjectInfo, plan_pick_place
 from cap_tabletop.objects import BLOCK_SIZE
 from cap_tabletop.workspace import (
     CORNERS, MIDDLE, SIDES, SPAWN_X_RANGE, SPAWN_Y_RANGE, TABLE_X_RANGE, TABLE_Y_RANGE, TABLE_Z,

@@ -1,6 +1,6 @@
 """The kitchen in MuJoCo: real-time factor of the full scene, and navigation driven through the physics.
 
-No ROS: the navigation executor (planner, path follower, timed trajectory; cap_control.navigation_executor) drives
+No ROS: the navigation executor (planner, path follower, timed trajectory; cap_control.navigation.executor) drives
 the simulated base through a port that runs the world itself, from location to location in a seeded random order.
 Per drive: the base's final position and heading error against the goal, the planned duration, and the simulated
 time over the wall time it took (the real-time factor while the base drives and the arm holds its stowed pose).
@@ -21,8 +21,8 @@ from concurrent.futures import Future
 import numpy as np
 from cap_mobile import layout, robot
 
-from cap_control.navigation import wrap_angle
-from cap_control.navigation_executor import Base, NavigateRequest, NavigationExecutor
+from cap_control.navigation.plan import wrap_angle
+from cap_control.navigation.executor import Base, NavigateRequest, NavigationExecutor
 from cap_control.ports import ArmOutcome, ArmResult, Ending, Interruption, PendingGoal
 from cap_sim_bridge.world import World
 

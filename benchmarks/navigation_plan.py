@@ -1,4 +1,4 @@
-"""Planning on the kitchen's occupancy grid and following the plan (cap_control.navigation; no ROS, no simulator).
+"""Planning on the kitchen's occupancy grid and following the plan (cap_control.navigation.plan; no ROS, no simulator).
 
 Random pairs of free start and goal poses in the kitchen (seeded): the grid is built once from the furniture's
 footprints and inflated by the base's radius plus a margin; for each pair the planner's time, the path's length
@@ -20,7 +20,7 @@ import time
 import numpy as np
 from cap_mobile.layout import BASE_RADIUS, FURNITURE, ROOM_X_RANGE, ROOM_Y_RANGE
 
-from cap_control.navigation import (
+from cap_control.navigation.plan import (
     NavigationError, OccupancyGrid, PathFollower, follow_on_ideal_base, path_length, plan_path, wrap_angle,
 )
 

@@ -36,8 +36,8 @@ from rclpy.parameter import Parameter  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
 from cap_bringup.cpu_affinity import pin_to_one_cpu  # noqa: E402
-from cap_control.pick_place import ObjectInfo, allowed_target_range, yaw_of_quaternion  # noqa: E402
-from cap_control.pick_place_node import PickPlaceNode  # noqa: E402
+from cap_control.pick_place.plan import ObjectInfo, allowed_target_range, yaw_of_quaternion  # noqa: E402
+from cap_control.pick_place.node import PickPlaceNode  # noqa: E402
 from cap_interfaces.action import PickPlace  # noqa: E402
 from cap_interfaces.msg import GraphNames  # noqa: E402
 from cap_perception.perception_node import PerceptionNode  # noqa: E402

@@ -2,7 +2,7 @@
 line takes, and how fast the simulation runs with the ink being laid.
 
 For each shape (a 20 cm line, a 10 cm square, a circle of radius 5 cm, each at the default tool speed 0.1 m/s and at
-0.2 m/s), the path is planned by cap_control.path_following and run in the MuJoCo world of the whiteboard scene:
+0.2 m/s), the path is planned by cap_control.follow_path.plan and run in the MuJoCo world of the whiteboard scene:
 - tracking error: while the marker follows a stroke, the distance in the board's plane from the simulated tip (the
   sphere's centre, where the physics puts it) to the commanded stroke [mm], median / 95th percentile /
   max over all steps in contact;
@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 
 from cap_bench.whiteboard import shapes  # noqa: E402
 from cap_bench.whiteboard.ink_check import check_drawing, distance_to_polylines  # noqa: E402
-from cap_control.path_following import PathConfig, StepKind, plan_path  # noqa: E402
+from cap_control.follow_path.plan import PathConfig, StepKind, plan_path  # noqa: E402
 from cap_sim_bridge.world import World  # noqa: E402
 from cap_whiteboard import board, tool  # noqa: E402
 

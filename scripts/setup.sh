@@ -43,6 +43,9 @@ src_hash=$( (find ros_ws/src -type f \( -name package.xml -o -name setup.py -o -
     | sha1sum | cut -d' ' -f1)
 if [ "$(cat ros_ws/install/.cap-source 2>/dev/null)" != "$src_hash" ]; then
   step "building ros_ws with colcon"
+  # A renamed or removed config or launch file leaves its --symlink-install link dangling, and colcon then fails to
+  # copy it: links to nothing go first.
+  [ -d ros_ws/build ] && find ros_ws/build ros_ws/install -xtype l -delete 2>/dev/null || true
   (
     export VIRTUAL_ENV=$VENV PATH=$VENV/bin:$PATH
     # The venv is the ament prefix: without this CMake finds no rosidl package (the ROS wheels' CMake files look for packages under it).

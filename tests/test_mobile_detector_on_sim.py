@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from cap_mobile import layout, robot
 
-from cap_control.navigation import plan_path
-from cap_control.navigation_executor import NavigationConfig
+from cap_control.navigation.plan import plan_path
+from cap_control.navigation.executor import NavigationConfig
 from cap_perception.detectors.mobile import detect_kitchen
 from cap_perception.rgbd import CameraView
 from cap_sim_bridge.world import World

@@ -20,8 +20,8 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Empty
 
 from cap_control import ros_conversions as conv
-from cap_control.navigation import wrap_angle
-from cap_control.navigation_node import NavigationNode
+from cap_control.navigation.plan import wrap_angle
+from cap_control.navigation.node import NavigationNode
 from cap_interfaces.action import Navigate
 from cap_interfaces.msg import GraphNames
 from cap_sim_bridge.bridge_node import SimBridgeNode

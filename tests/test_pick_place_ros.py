@@ -21,8 +21,8 @@ from rclpy.parameter import Parameter
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Empty
 
-from cap_control.arm_node import ActionGoal, _mark_canceling
-from cap_control.pick_place_node import PickPlaceNode
+from cap_control.skill_node import ActionGoal, _mark_canceling
+from cap_control.pick_place.node import PickPlaceNode
 from cap_interfaces.action import FollowJointTrajectory, PickPlace
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectState, ResetScene

@@ -42,7 +42,7 @@ def test_after_placing_the_clear_view_move_leaves_the_placed_block_in_the_top_ca
     # With perception from the top camera, pick-and-place ends each place by moving the tool out of the camera's
     # line of sight; on the far half of the table's centre line a short move left the block behind the forearm.
     from cap_control.kinematics import HOME_JOINTS
-    from cap_control.pick_place import ObjectInfo, PickPlaceConfig, StageName, plan_pick_place
+    from cap_control.pick_place.plan import ObjectInfo, PickPlaceConfig, StageName, plan_pick_place
     from cap_sim_bridge.objects import ObjectSpec
 
     camera = tuple(world.camera_pose('top')[:3, 3])

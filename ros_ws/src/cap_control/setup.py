@@ -1,8 +1,11 @@
 from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
 package_name = 'cap_control'
+# Every skill folder with a node.py is an executable of that folder's name, so none is forgotten in a list.
+SKILLS = sorted(path.parent.name for path in Path(package_name).glob('*/node.py'))
 
 setup(
     name=package_name,
@@ -22,12 +25,6 @@ setup(
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={
-        'console_scripts': [
-            'pick_place = cap_control.pick_place_node:main',
-            'follow_path = cap_control.follow_path_node:main',
-            'navigation = cap_control.navigation_node:main',
-            'mobile_pick_place = cap_control.mobile_pick_place_node:main',
-            'controller_node = cap_control.controller_node:main',
-        ],
+        'console_scripts': [f'{name} = {package_name}.{name}.node:main' for name in SKILLS],
     },
 )

@@ -11,7 +11,7 @@ import numpy as np
 from cap_bench import table
 from cap_bench.episodes import MAGNITUDE_DISTANCES, ORDINALS, Episode
 from cap_tabletop.objects import BLOCK_SIZE, BOWL_RIM_RADIUS
-from cap_control.pick_place import PickPlaceConfig
+from cap_control.pick_place.plan import PickPlaceConfig
 from cap_tabletop.workspace import NORMALISED_ORIGIN, NORMALISED_SPAN, TABLE_X_RANGE, TABLE_Y_RANGE
 
 _BLOCKS = "block_names = [name for name in get_obj_names() if name.endswith('block')]\n"

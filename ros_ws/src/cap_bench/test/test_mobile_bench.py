@@ -163,7 +163,7 @@ def test_a_search_episode_hides_its_object_at_the_start_and_shows_it_from_a_corn
     from cap_sim_bridge.objects import ObjectSpec
     from cap_sim_bridge.world import World
 
-    from cap_control.navigation_executor import NavigationConfig
+    from cap_control.navigation.executor import NavigationConfig
 
     grid, world = NavigationConfig().grid(), World('mobile')
     for seed in range(10):

@@ -2,12 +2,12 @@
 
 ROS 2's launch packages are not on PyPI, so the files are not run here; the launch file starts the nodes of the
 domain's graph (cap_bringup.nodes.graph_nodes), and this checks every such node of every domain against the
-packages' entry points, config folders and modules.
+packages' installed entry points (which a setup.py may derive from its folders), config folders and modules.
 """
 from __future__ import annotations
 
+import importlib.metadata
 import pathlib
-import re
 
 import pytest
 
@@ -19,8 +19,9 @@ LAUNCH_FILES = sorted((SRC / 'cap_bringup' / 'launch').glob('*.launch.py'))
 
 
 def _console_scripts(package: str) -> set[str]:
-    text = (SRC / package / 'setup.py').read_text(encoding='utf-8')
-    return set(re.findall(r"'(\w+) = [\w.]+:\w+'", text))
+    """The executables the built workspace installed for `package` (its console_scripts entry points)."""
+    return {entry.name for entry in importlib.metadata.distribution(package).entry_points
+            if entry.group == 'console_scripts'}
 
 
 def test_there_is_a_launch_file():

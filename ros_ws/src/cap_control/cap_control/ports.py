@@ -1,10 +1,11 @@
 """Ports to the arm, the gripper and perception, and the waits of one run over them (plain Python, no ROS).
 
-The executors of cap_control (pick-and-place, path following) talk to the robot through these small abstract
-classes: a ROS node implements them over its action clients, services and /joint_states, and unit tests with
-fakes. `GoalRun` holds what every run does with them: wait for a future while a cancel or a stop may come (every
-wait sleeps on one condition that a future completing, an interruption or a timeout wakes), send a goal, and
-cancel the goal in flight when interrupted.
+The executors of cap_control (`<skill>.executor`: pick-and-place, path following, navigation, mobile
+pick-and-place; the controller loop has ports of its own) talk to the robot through these small abstract classes:
+the nodes implement them over their action clients, services and /joint_states (cap_control.skill_node), and unit
+tests with fakes. `GoalRun` holds what every run does with them: wait for a future while a cancel or a stop may
+come (every wait sleeps on one condition that a future completing, an interruption or a timeout wakes), send a
+goal, and cancel the goal in flight when interrupted.
 
 A goal counts as running from the moment it is sent, not only once the server accepts it: a cancel or stop while
 the acceptance is awaited cancels it too (the port sends the cancel once the server has the goal), so a result that
@@ -20,7 +21,7 @@ from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any
 
-from cap_control.pick_place import ObjectInfo
+from cap_control.pick_place.plan import ObjectInfo
 from cap_control.trajectory import JointTrajectory
 
 

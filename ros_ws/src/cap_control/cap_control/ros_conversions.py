@@ -1,11 +1,12 @@
 """Conversions between cap_control's plain data and ROS messages (message types only, no rclpy)."""
 from __future__ import annotations
 
+import math
 from typing import Sequence
 
 import numpy as np
 from cap_ros_common.time import duration_msg, to_seconds
-from geometry_msgs.msg import Point, Pose
+from geometry_msgs.msg import Point, Pose, PoseStamped
 from nav_msgs.msg import MapMetaData
 from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from sensor_msgs.msg import JointState
@@ -17,12 +18,13 @@ from cap_interfaces.msg import JointTolerance
 from cap_interfaces.msg import ObjectState as ObjectStateMsg
 from cap_interfaces.srv import GetObjectState
 
-from cap_control.navigation import OccupancyGrid
-from cap_control.pick_place import ObjectInfo, yaw_of_quaternion
+from cap_control.navigation.plan import OccupancyGrid
+from cap_control.pick_place.plan import ObjectInfo, yaw_of_quaternion
 from cap_control.ports import ArmOutcome, ArmResult, ObjectReport
 from cap_control.trajectory import JointTrajectory
 
 GRIPPER_FINGER_JOINTS = ('gripper_left_finger_joint', 'gripper_right_finger_joint')
+WORLD_FRAME = 'world'  # the URDF's root: the frame of every cap-ros pose
 
 
 def trajectory_msg(trajectory: JointTrajectory) -> JointTrajectoryMsg:
@@ -99,6 +101,21 @@ def gripper_opening(msg: JointState) -> float | None:
 
 def point_msg(xyz: Sequence[float]) -> Point:
     return Point(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
+
+
+def pose_msg(pose: Sequence[float], stamp) -> PoseStamped:
+    """The mobile base's pose (x [m], y [m], yaw [rad]) in the world frame."""
+    msg = PoseStamped()
+    msg.header.frame_id, msg.header.stamp = WORLD_FRAME, stamp
+    msg.pose.position.x, msg.pose.position.y = float(pose[0]), float(pose[1])
+    msg.pose.orientation.z, msg.pose.orientation.w = math.sin(pose[2] / 2), math.cos(pose[2] / 2)
+    return msg
+
+
+def yaw_of(msg: PoseStamped) -> float:
+    """The yaw [rad] of a pose's orientation."""
+    q = msg.pose.orientation
+    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
 
 
 OCCUPIED, FREE = 100, 0  # nav_msgs/OccupancyGrid's cell values (-1 would be unknown: the map has none)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from cap_mobile import layout
 
-from cap_control.navigation import NavigateErrorCode
-from cap_control.navigation_executor import Base, NavigateRequest, NavigationConfig, NavigationExecutor
+from cap_control.navigation.plan import NavigateErrorCode
+from cap_control.navigation.executor import Base, NavigateRequest, NavigationConfig, NavigationExecutor
 from cap_control.ports import ArmOutcome, ArmResult, Ending, Interruption, PendingGoal
 
 

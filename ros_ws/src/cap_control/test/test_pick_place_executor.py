@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from cap_control.kinematics import HOME_JOINTS, forward_kinematics
-from cap_control.pick_place import ObjectInfo, PickPlaceConfig, PickPlaceErrorCode, StageName
-from cap_control.pick_place_executor import ExecutionConfig, PickPlaceExecutor, PickPlaceRequest
+from cap_control.pick_place.plan import ObjectInfo, PickPlaceConfig, PickPlaceErrorCode, StageName
+from cap_control.pick_place.executor import ExecutionConfig, PickPlaceExecutor, PickPlaceRequest
 from cap_control.ports import (
     Arm, ArmOutcome, ArmResult, Ending, Gripper, GripperOutcome, Interruption, ObjectReport, PendingGoal, Perception,
 )

@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from cap_control.pick_place import (
+from cap_control.pick_place.plan import (
     ObjectInfo, Observation, PickPlaceErrorCode, StageName, TrajectoryStep, plan_pick_place,
 )
 from cap_sim_bridge.objects import ObjectSpec
@@ -115,7 +115,7 @@ def test_descent_stops_on_contact_when_the_target_is_taller_than_perceived(world
 def test_after_clearing_the_cameras_view_near_the_base_the_next_pick_still_succeeds(corner):
     # The clear-view move once ended folded up close to the base (0.14 m out); the next travel from there swept
     # low across the table and knocked the next block away from the fingers.
-    from cap_control.pick_place import PickPlaceConfig
+    from cap_control.pick_place.plan import PickPlaceConfig
 
     world = World(objects=[ObjectSpec('brown block', 'block', 'brown', (0.15, -0.6)),
                                    ObjectSpec('cyan block', 'block', 'cyan', (0.006, -0.377))])
@@ -131,7 +131,7 @@ def test_after_clearing_the_cameras_view_near_the_base_the_next_pick_still_succe
 def test_a_block_set_down_over_the_edge_falls_and_is_reported_so(world, corner):
     # A margin below zero lets through the targets that the planner refuses by default: the check after the
     # place, not the refusal, is judged here.
-    from cap_control.pick_place import PickPlaceConfig
+    from cap_control.pick_place.plan import PickPlaceConfig
 
     config = PickPlaceConfig(edge_margin=-0.05)
     plan = plan_pick_place(object_info(world, 'yellow block'), corner, world.joint_positions(), config)

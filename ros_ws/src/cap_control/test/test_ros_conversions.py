@@ -7,7 +7,7 @@ from builtin_interfaces.msg import Time
 from cap_mobile import layout
 
 from cap_control import ros_conversions as conv
-from cap_control.navigation_executor import NavigationConfig
+from cap_control.navigation.executor import NavigationConfig
 
 
 def test_the_kitchen_map_comes_back_cell_for_cell_and_answers_the_same():

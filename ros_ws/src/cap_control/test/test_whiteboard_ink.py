@@ -1,9 +1,9 @@
 """Ink on the whiteboard: laid where the marker's tip touches the board in the physics, wiped where the eraser does,
-with paths planned by cap_control.path_following and run in the MuJoCo world."""
+with paths planned by cap_control.follow_path.plan and run in the MuJoCo world."""
 import numpy as np
 import pytest
 
-from cap_control.path_following import plan_path
+from cap_control.follow_path.plan import plan_path
 from cap_sim_bridge.world import World
 from cap_whiteboard import board
 

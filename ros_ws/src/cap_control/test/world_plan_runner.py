@@ -4,7 +4,7 @@ the table top and of the mobile manipulator. Imported by those tests from this f
 """
 import numpy as np
 
-from cap_control.pick_place import (
+from cap_control.pick_place.plan import (
     GripperStep, ObjectInfo, Observation, PickPlaceErrorCode, PickPlacePlan, TrajectoryStep, yaw_of_quaternion,
 )
 

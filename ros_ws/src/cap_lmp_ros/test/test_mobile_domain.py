@@ -99,7 +99,7 @@ def test_the_session_remembers_which_bin_is_which_and_puts_things_away_there():
 
 def test_every_place_the_reference_session_drives_to_is_free_for_the_base():
     """The kitchen's layout leaves room for the paper's shapes: no corner lies in furniture or near a wall."""
-    from cap_control.navigation_executor import NavigationConfig
+    from cap_control.navigation.executor import NavigationConfig
     grid = NavigationConfig().grid()
     robot = Base()
     domain = get_domain('mobile')

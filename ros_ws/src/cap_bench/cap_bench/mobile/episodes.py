@@ -33,7 +33,7 @@ from cap_mobile import layout, objects
 
 from cap_bench.mobile import sightlines
 from cap_bringup.base_path import rectangle_corners
-from cap_control.navigation_executor import NavigationConfig
+from cap_control.navigation.executor import NavigationConfig
 
 TEMPLATES = ('goto', 'rectangle', 'back_and_forth', 'fetch', 'bin', 'count', 'search')
 GOTO_PLACES = tuple(layout.LOCATION_NAMES)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import functools
 from typing import Sequence
 
-from cap_control.navigation_executor import NavigationConfig
+from cap_control.navigation.executor import NavigationConfig
 
 _CONFIG = NavigationConfig()
 

@@ -66,7 +66,7 @@ class NodeSpec:
 # The nodes of the table top, which other domains reuse: perception of the objects, and pick-and-place.
 PERCEPTION_NODE = NodeSpec('perception_node', 'cap_perception', 'perception_node',
                            'cap_perception.perception_node:PerceptionNode', 'perception.yaml')
-PICK_PLACE_NODE = NodeSpec('pick_place', 'cap_control', 'pick_place', 'cap_control.pick_place_node:PickPlaceNode',
+PICK_PLACE_NODE = NodeSpec('pick_place', 'cap_control', 'pick_place', 'cap_control.pick_place.node:PickPlaceNode',
                            'pick_place.yaml')
 
 

@@ -10,8 +10,8 @@ from typing import Any
 from cap_lmp_ros.domains.controllers.lmps import build_engine
 from cap_lmp_ros.domains.registry import Domain, NodeSpec, RobotBinding
 
-CONTROLLER_NODE = NodeSpec('controller_node', 'cap_control', 'controller_node',
-                           'cap_control.controller_node:ControllerNode', 'controller_node.yaml')
+CONTROLLER_NODE = NodeSpec('controller_node', 'cap_control', 'controller', 'cap_control.controller.node:ControllerNode',
+                           'controller.yaml')
 # The names RosControllersApi binds over ROS; build_engine shows generated code run_controller and the state
 # functions in their place. start_controller takes the program's controller function (as a handle).
 ROBOT_FUNCTIONS = ('start_controller', 'read_plant_state', 'say')

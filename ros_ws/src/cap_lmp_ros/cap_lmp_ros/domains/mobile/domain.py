@@ -16,10 +16,10 @@ ROBOT_FUNCTIONS = ('get_obj_names', 'get_visible_obj_names', 'is_obj_visible', '
                    'place_at_pos', 'place_at_obj', 'say')
 QUERY_FUNCTIONS = ('get_obj_names', 'get_visible_obj_names', 'is_obj_visible', 'get_obj_pos', 'get_loc_names',
                    'get_loc_pos', 'get_robot_pos_and_angle')  # read the world only
-NAVIGATION_NODE = NodeSpec('navigation', 'cap_control', 'navigation', 'cap_control.navigation_node:NavigationNode',
+NAVIGATION_NODE = NodeSpec('navigation', 'cap_control', 'navigation', 'cap_control.navigation.node:NavigationNode',
                            'navigation.yaml')
 MOBILE_PICK_PLACE_NODE = NodeSpec('mobile_pick_place', 'cap_control', 'mobile_pick_place',
-                                  'cap_control.mobile_pick_place_node:MobilePickPlaceNode', 'mobile_pick_place.yaml')
+                                  'cap_control.mobile_pick_place.node:MobilePickPlaceNode', 'mobile_pick_place.yaml')
 
 
 def robot_api(node: Any, say_publisher: Any, service_timeout_s: float, motion_timeout_s: float) -> RobotBinding:

@@ -12,7 +12,7 @@ from cap_lmp_ros.domains.whiteboard.plan import describe_call
 
 ROBOT_FUNCTIONS = ('get_obj_names', 'get_obj_pos', 'draw', 'erase', 'say')
 QUERY_FUNCTIONS = ('get_obj_names', 'get_obj_pos')  # read the world only: a plan-only run calls them
-FOLLOW_PATH_NODE = NodeSpec('follow_path', 'cap_control', 'follow_path', 'cap_control.follow_path_node:FollowPathNode',
+FOLLOW_PATH_NODE = NodeSpec('follow_path', 'cap_control', 'follow_path', 'cap_control.follow_path.node:FollowPathNode',
                             'follow_path.yaml')
 
 

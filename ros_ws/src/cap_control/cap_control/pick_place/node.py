@@ -1,64 +1,27 @@
 """pick_place: the PickPlace action over the arm's FollowJointTrajectory and GripperCommand actions.
 
-The work is cap_control.pick_place_executor's: this node binds its ports to ROS (the sim's trajectory and gripper
-actions, the perception services, /joint_states) and serves the PickPlace action with it: feedback per stage, and
-a cancel of the goal or a message on the stop topic interrupts the run (the arm holds where it is; the goal ends
-CANCELLED, aborted for a stop). Parameters are declared from PickPlaceConfig (nested: workspace.x_min,
-cartesian_limits.speed), MotionSettings and ExecutionConfig, whose fields hold every default. What it shares with
-the other nodes that move the arm (joint state, arm port, one goal at a time, stop) is cap_control.arm_node's.
+The work is cap_control.pick_place.executor's (planned by cap_control.pick_place.plan): this node binds its ports to
+ROS (the sim's trajectory and gripper actions, the perception services, /joint_states) and serves the PickPlace
+action with it: feedback per stage, and a cancel of the goal or a message on the stop topic interrupts the run (the
+arm holds where it is; the goal ends CANCELLED, aborted for a stop). Parameters are declared from PickPlaceConfig
+(nested: workspace.x_min, cartesian_limits.speed), MotionSettings and ExecutionConfig, whose fields hold every
+default. What it shares with the other nodes that move the arm (joint state, the arm, gripper and perception ports,
+one goal at a time, stop) is cap_control.skill_node's.
 """
 from __future__ import annotations
 
-from concurrent.futures import Future
-
-from cap_ros_common.actions import RESULT_TIMEOUT_S
+from cap_ros_common.actions import RESULT_TIMEOUT_S, ActionClient
 from cap_ros_common.parameters import declare_config
 from rclpy.action import ActionServer
-from cap_ros_common.actions import ActionClient
 from rclpy.callback_groups import ReentrantCallbackGroup
 
 from cap_control import ros_conversions as conv
-from cap_control.arm_node import ActionGoal, ArmNode, ArmPort, relay, spin_node
-from cap_control.pick_place import PickPlaceConfig, StageName
-from cap_control.pick_place_executor import ExecutionConfig, MotionSettings, PickPlaceExecutor, PickPlaceRequest
-from cap_control.ports import Gripper, GripperOutcome, PendingGoal, Perception
+from cap_control.pick_place.executor import ExecutionConfig, MotionSettings, PickPlaceExecutor, PickPlaceRequest
+from cap_control.pick_place.plan import PickPlaceConfig, StageName
+from cap_control.skill_node import ArmNode, ArmPort, GripperPort, PerceptionPort, spin_node
 from cap_interfaces.action import GripperCommand, PickPlace
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectNames, GetObjectState
-
-
-class GripperPort(Gripper):
-    server_description = f'the gripper action {GraphNames.SIM_GRIPPER_ACTION}'
-
-    def __init__(self, node: 'PickPlaceNode'):
-        self._node = node
-
-    def server_ready(self) -> Future:
-        return self._node.when_ready(self._node.gripper_client.server_is_ready)
-
-    def command(self, position: float, max_effort: float) -> PendingGoal:
-        return ActionGoal(self._node.gripper_client, conv.gripper_goal(position, max_effort),
-                          lambda result: GripperOutcome(float(result.position), bool(result.stalled)))
-
-
-class PerceptionPort(Perception):
-    service_description = f'the perception service {GraphNames.PERCEPTION_OBJECT_STATE_SERVICE}'
-
-    def __init__(self, node: 'PickPlaceNode'):
-        self._node = node
-
-    def state_service_ready(self) -> Future:
-        return self._node.when_ready(lambda: self._node.state_client.service_is_ready())
-
-    def names_available(self) -> bool:
-        return self._node.names_client.service_is_ready()
-
-    def object_names(self, visible_only: bool = True) -> Future:
-        return relay(self._node.names_client.call_async(GetObjectNames.Request(visible_only=visible_only)),
-                      lambda response: list(response.names))
-
-    def object_state(self, name: str) -> Future:
-        return relay(self._node.state_client.call_async(GetObjectState.Request(name=name)), conv.object_report)
 
 
 class PickPlaceNode(ArmNode):

@@ -1,5 +1,6 @@
 """Carrying out a MobilePickPlace request over ports (plain Python, no ROS): drive where the arm reaches, then run
-the arm's stages (cap_control.mobile_manipulation) with the table top's plan runner (pick_place_executor.PlanRun).
+the arm's stages (cap_control.mobile_pick_place.plan) with the table top's plan runner
+(cap_control.pick_place.executor.PlanRun).
 
 One object is held at a time: a pick with the hands full, or a place with nothing held, is refused before anything
 moves. The object is looked up again after the base arrived (the camera sees it better from there), and its
@@ -16,12 +17,12 @@ from typing import Callable, Sequence
 import numpy as np
 from cap_mobile import layout, objects as mobile_objects, robot
 
-from cap_control.mobile_manipulation import (
+from cap_control.mobile_pick_place.plan import (
     MOBILE_CONFIG, Held, MobileErrorCode, object_in_arm_frame, plan_pick, plan_place, reach_pose, to_arm,
 )
-from cap_control.navigation import OccupancyGrid
-from cap_control.pick_place import PickPlaceConfig, PickPlaceError, StageName
-from cap_control.pick_place_executor import ExecutionConfig, PickPlaceOutcome, PlanRun
+from cap_control.navigation.plan import OccupancyGrid
+from cap_control.pick_place.executor import ExecutionConfig, PickPlaceOutcome, PlanRun
+from cap_control.pick_place.plan import PickPlaceConfig, PickPlaceError, StageName
 from cap_control.ports import (
     Arm, Ending, Failed, Gripper, Interrupted, Interruption, PendingGoal, Perception, interruption_message,
 )

@@ -1,8 +1,8 @@
 """Carrying out a Navigate request over a port to the mobile base (plain Python, no ROS).
 
 `NavigationExecutor.run` resolves the goal (a named location of the kitchen: its approach pose; or a pose), plans a
-path on the occupancy grid of the kitchen's furniture inflated by the base (cap_control.navigation), drives it with
-the path follower on an ideal base to time it, and sends the base's joints that timed trajectory. The base's
+path on the occupancy grid of the kitchen's furniture inflated by the base (cap_control.navigation.plan), drives it
+with the path follower on an ideal base to time it, and sends the base's joints that timed trajectory. The base's
 controller follows it within a path tolerance: a base held back by something the map does not have (pushed against
 an obstacle) strays beyond it, the controller stops the base, and the executor marks the spot ahead of the base as
 blocked and plans again from where the base is (a recovery), up to `max_recoveries` times. Feedback every
@@ -22,7 +22,7 @@ import numpy as np
 from cap_mobile import layout
 from cap_ros_common.parameters import parameter
 
-from cap_control.navigation import (
+from cap_control.navigation.plan import (
     FollowerLimits, NavigateErrorCode, NavigationError, OccupancyGrid, PathFollower, base_trajectory,
     follow_on_ideal_base, plan_path, wrap_angle,
 )

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from cap_control.kinematics import forward_kinematics
-from cap_control.path_following import (
+from cap_control.follow_path.plan import (
     PathConfig, PathError, PathErrorCode, StepKind, Surface, plan_path, resample, split_at_corners,
     tool_tip_positions,
 )

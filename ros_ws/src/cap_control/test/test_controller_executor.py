@@ -8,8 +8,8 @@ import threading
 import numpy as np
 import pytest
 
-from cap_control.control_loop import (ControlLoop, ControllerFailure, Outcome, PlantError, Reading, check_output,
-                                      make_run)
+from cap_control.controller.executor import ControlLoop, Outcome, PlantError
+from cap_control.controller.plan import ControllerFailure, Reading, check_output, make_run
 from cap_controllers import plants
 from cap_controllers.plants import ArmState
 from cap_sim_bridge.scenes import controllers as controller_scene

@@ -9,7 +9,7 @@ from cap_tabletop import objects
 from cap_tabletop.cameras import TOP
 
 from cap_control.kinematics import HOME_JOINTS, forward_kinematics, inverse_kinematics, top_down_pose
-from cap_control.pick_place import (
+from cap_control.pick_place.plan import (
     GripperStep, LiftCheck, ObjectInfo, Observation, PickPlaceConfig, PickPlaceError,
     PickPlaceErrorCode, PlacedCheck, StageName, TrajectoryStep, Workspace, allowed_target_range,
     check_place_on_table, clear_of_bowl_rims, footprint_half_extents, plan_pick_place, target_taken_by,

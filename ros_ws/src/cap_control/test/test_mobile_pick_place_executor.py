@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from cap_mobile import layout, robot
 
-from cap_control.mobile_executor import (
+from cap_control.mobile_pick_place.executor import (
     TASK_PICK, TASK_PLACE_AT_OBJECT, TASK_PLACE_AT_POSITION, MobilePickPlaceExecutor, MobileRequest, Navigator,
 )
-from cap_control.mobile_manipulation import Held, MobileErrorCode
-from cap_control.navigation import OccupancyGrid
-from cap_control.navigation_executor import NavigationConfig
-from cap_control.pick_place import ObjectInfo
+from cap_control.mobile_pick_place.plan import Held, MobileErrorCode
+from cap_control.navigation.plan import OccupancyGrid
+from cap_control.navigation.executor import NavigationConfig
+from cap_control.pick_place.plan import ObjectInfo
 from cap_control.ports import Arm, Ending, Gripper, Interruption, ObjectReport, PendingGoal, Perception
 
 

@@ -1,14 +1,17 @@
-"""What the nodes that move the robot share: the latest joint state, the serving of one long action goal at a time
-that a cancel or cap/stop interrupts, and for the arm a port to its FollowJointTrajectory action over ROS.
+"""The ROS plumbing every skill node (cap_control.<skill>.node) shares, one module below them all, so that no node
+imports another: the latest joint state, the serving of one long action goal at a time that a cancel or cap/stop
+interrupts, the ports of the executors over ROS (the arm's FollowJointTrajectory action, the gripper's
+GripperCommand action, the perception services), an rclpy action goal as a PendingGoal, and main()'s spinning.
 
 `GoalNode` is the base of the nodes that move the robot (the navigation node's too), `ArmNode` (with the arm's
-action client) that of pick_place and follow_path. A GoalNode keeps the latest /joint_states (and completes futures
-waiting for named joints), listens to the stop topic, and runs an action goal (`serve`): one at a time (a second
-goal is refused), with an `Interruption` that the goal's cancel and the stop topic set, ending CANCELED, aborted
-(stopped, failed) or succeeded as the executor's outcome says.
+action client) that of pick_place, follow_path and mobile_pick_place. A GoalNode keeps the latest /joint_states (and
+completes futures waiting for named joints), listens to the stop topic, and runs an action goal (`serve`): one at a
+time (a second goal is refused), with an `Interruption` that the goal's cancel and the stop topic set, ending
+CANCELED, aborted (stopped, failed) or succeeded as the executor's outcome says.
 
-Threading: every callback is in one reentrant group, and main() spins a MultiThreadedExecutor, so the execute
-callback may wait on service and action futures whose done callbacks other executor threads run.
+Threading: every callback is in one reentrant group, and main() spins a MultiThreadedExecutor (`spin_node`, the
+controller node's too), so the execute callback may wait on service and action futures whose done callbacks other
+executor threads run.
 
 Two waits are timed retries, because rclpy offers no event for what they wait for: whether an action server or
 service is available is looked at every READY_CHECK_PERIOD (a timer on the steady clock, so simulated time, which
@@ -35,10 +38,13 @@ from std_msgs.msg import Empty
 
 from cap_control import ros_conversions as conv
 from cap_control.kinematics import JOINT_NAMES
-from cap_control.ports import Arm, Ending, Interruption, PendingGoal, interruption_message
+from cap_control.ports import (
+    Arm, Ending, Gripper, GripperOutcome, Interruption, PendingGoal, Perception, interruption_message,
+)
 from cap_control.trajectory import JointTrajectory
 from cap_interfaces.action import FollowJointTrajectory
 from cap_interfaces.msg import GraphNames
+from cap_interfaces.srv import GetObjectNames, GetObjectState
 
 READY_CHECK_PERIOD = 0.02  # [s] steady time between looks at a server's availability (rclpy has no event for it)
 
@@ -152,6 +158,44 @@ class ArmPort(Arm):
                goal_tolerance: float | None = None) -> PendingGoal:
         return ActionGoal(self._node.arm_client,
                           conv.follow_trajectory_goal(trajectory, contact_tolerance, goal_tolerance), conv.arm_outcome)
+
+
+class GripperPort(Gripper):
+    """The gripper's GripperCommand action, through the node's `gripper_client`."""
+
+    server_description = f'the gripper action {GraphNames.SIM_GRIPPER_ACTION}'
+
+    def __init__(self, node: 'ArmNode'):
+        self._node = node
+
+    def server_ready(self) -> Future:
+        return self._node.when_ready(self._node.gripper_client.server_is_ready)
+
+    def command(self, position: float, max_effort: float) -> PendingGoal:
+        return ActionGoal(self._node.gripper_client, conv.gripper_goal(position, max_effort),
+                          lambda result: GripperOutcome(float(result.position), bool(result.stalled)))
+
+
+class PerceptionPort(Perception):
+    """Perception's object services, through the node's `state_client` and `names_client`."""
+
+    service_description = f'the perception service {GraphNames.PERCEPTION_OBJECT_STATE_SERVICE}'
+
+    def __init__(self, node: 'ArmNode'):
+        self._node = node
+
+    def state_service_ready(self) -> Future:
+        return self._node.when_ready(lambda: self._node.state_client.service_is_ready())
+
+    def names_available(self) -> bool:
+        return self._node.names_client.service_is_ready()
+
+    def object_names(self, visible_only: bool = True) -> Future:
+        return relay(self._node.names_client.call_async(GetObjectNames.Request(visible_only=visible_only)),
+                     lambda response: list(response.names))
+
+    def object_state(self, name: str) -> Future:
+        return relay(self._node.state_client.call_async(GetObjectState.Request(name=name)), conv.object_report)
 
 
 class GoalNode(Node):
@@ -336,7 +380,7 @@ class GoalNode(Node):
 
 
 class ArmNode(GoalNode):
-    """A GoalNode that moves the arm: pick_place and follow_path."""
+    """A GoalNode that moves the arm: pick_place, follow_path and mobile_pick_place."""
 
     def __init__(self, name: str, **kwargs) -> None:
         super().__init__(name, **kwargs)
@@ -366,7 +410,7 @@ def _mark_canceling(goal_handle, timeout_s: float = 1.0) -> bool:
 
 
 def spin_node(node_class: type, args: list[str] | None = None) -> None:
-    """main() of an ArmNode: build it and spin it on a multi-threaded executor until shut down."""
+    """main() of a skill node: build it and spin it on a multi-threaded executor (4 threads) until shut down."""
     rclpy.init(args=args)
     node = None
     try:
@@ -382,4 +426,5 @@ def spin_node(node_class: type, args: list[str] | None = None) -> None:
         rclpy.try_shutdown()
 
 
-__all__ = ['ActionGoal', 'ArmNode', 'ArmPort', 'GoalNode', 'READY_CHECK_PERIOD', 'done_future', 'relay', 'spin_node']
+__all__ = ['ActionGoal', 'ArmNode', 'ArmPort', 'GoalNode', 'GripperPort', 'PerceptionPort', 'READY_CHECK_PERIOD',
+           'done_future', 'relay', 'spin_node']

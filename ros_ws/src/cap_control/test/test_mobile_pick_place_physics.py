@@ -9,12 +9,12 @@ import sys
 import pytest
 from cap_mobile import layout, objects, robot
 
-from cap_control.mobile_manipulation import (
+from cap_control.mobile_pick_place.plan import (
     MobileErrorCode, object_in_arm_frame, plan_pick, plan_place, reach_pose, to_arm,
 )
-from cap_control.navigation import PathFollower, base_trajectory, follow_on_ideal_base, plan_path, wrap_angle
-from cap_control.navigation_executor import NavigationConfig
-from cap_control.pick_place import PickPlaceErrorCode, PickPlaceError
+from cap_control.navigation.plan import PathFollower, base_trajectory, follow_on_ideal_base, plan_path, wrap_angle
+from cap_control.navigation.executor import NavigationConfig
+from cap_control.pick_place.plan import PickPlaceErrorCode, PickPlaceError
 from cap_sim_bridge.objects import ObjectSpec
 from cap_sim_bridge.world import World
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))  # world_plan_runner beside this file

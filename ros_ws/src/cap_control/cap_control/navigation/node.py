@@ -1,7 +1,7 @@
 """navigation: the Navigate and NavigateThroughPoses actions (/cap/control/navigate, .../navigate_through_poses)
 over the mobile base's FollowJointTrajectory action, and the base's pose (/cap/control/get_base_pose).
 
-The work is cap_control.navigation_executor's: this node binds its port to ROS (the simulator's base trajectory
+The work is cap_control.navigation.executor's: this node binds its port to ROS (the simulator's base trajectory
 action, the base's joints in /joint_states) and serves the actions with it, one goal at a time: a Navigate goal
 names a location of the kitchen (location_name) or a pose in the map frame, a NavigateThroughPoses goal poses to
 reach in order; feedback carries the base's pose, the time since the goal began, the time and distance left, the
@@ -13,7 +13,6 @@ UNREACHABLE, CANCELLED). Parameters are declared from NavigationConfig, whose fi
 """
 from __future__ import annotations
 
-import math
 from concurrent.futures import Future
 
 import numpy as np
@@ -22,25 +21,23 @@ from cap_ros_common.actions import RESULT_TIMEOUT_S, ActionClient
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.qos import LATCHED_QOS
 from cap_ros_common.time import duration_msg
-from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from rclpy.action import ActionServer
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from cap_control import ros_conversions as conv
-from cap_control.arm_node import ActionGoal, GoalNode, spin_node
-from cap_control.navigation import NavigateErrorCode
-from cap_control.navigation_executor import (
+from cap_control.navigation.executor import (
     Base, NavigateOutcome, NavigateProgress, NavigateRequest, NavigationConfig, NavigationExecutor,
 )
+from cap_control.navigation.plan import NavigateErrorCode
 from cap_control.ports import ArmOutcome, ArmResult, Ending, PendingGoal
+from cap_control.skill_node import ActionGoal, GoalNode, spin_node
 from cap_interfaces.action import FollowJointTrajectory, Navigate, NavigateThroughPoses
 from cap_interfaces.msg import GraphNames, JointTolerance
 from cap_interfaces.srv import GetBasePose
 
-# Poses are in the world frame (the URDF's root, as every cap-ros pose); goals may also name it "map", nav2's name.
-WORLD_FRAME = 'world'
-ACCEPTED_FRAMES = ('', 'world', 'map')
+# Poses are in the world frame (conv.WORLD_FRAME); goals may also name it "map", nav2's name.
+ACCEPTED_FRAMES = ('', conv.WORLD_FRAME, 'map')
 
 
 class _BasePort(Base):
@@ -86,19 +83,6 @@ def base_outcome(result: FollowJointTrajectory.Result) -> ArmOutcome:
     return conv.arm_outcome(result)
 
 
-def pose_msg(pose: np.ndarray, stamp) -> PoseStamped:
-    msg = PoseStamped()
-    msg.header.frame_id, msg.header.stamp = WORLD_FRAME, stamp
-    msg.pose.position.x, msg.pose.position.y = float(pose[0]), float(pose[1])
-    msg.pose.orientation.z, msg.pose.orientation.w = math.sin(pose[2] / 2), math.cos(pose[2] / 2)
-    return msg
-
-
-def yaw_of(msg: PoseStamped) -> float:
-    q = msg.pose.orientation
-    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
-
-
 class NavigationNode(GoalNode):
     goal_description = 'navigation'
     unknown_error_code = int(NavigateErrorCode.UNKNOWN)
@@ -122,7 +106,7 @@ class NavigationNode(GoalNode):
                             callback_group=self.callbacks)
         self.map_publisher = self.create_publisher(OccupancyGridMsg, GraphNames.NAVIGATION_MAP_TOPIC,
                                                    LATCHED_QOS)  # sent once, never changes
-        self.map_publisher.publish(conv.occupancy_grid_msg(self.navigation.static_grid, WORLD_FRAME,
+        self.map_publisher.publish(conv.occupancy_grid_msg(self.navigation.static_grid, conv.WORLD_FRAME,
                                                            self.get_clock().now().to_msg()))
         self.get_logger().info('navigation ready')
 
@@ -139,7 +123,7 @@ class NavigationNode(GoalNode):
             response.success, response.message = False, f'no joint state with the base\'s joints {BASE_JOINT_NAMES} yet'
             return response
         response.success = True
-        response.pose = pose_msg(pose, msg.header.stamp)
+        response.pose = conv.pose_msg(pose, msg.header.stamp)
         return response
 
     def _execute(self, goal_handle) -> Navigate.Result:
@@ -150,7 +134,7 @@ class NavigationNode(GoalNode):
             if not goal.location_name.strip() and goal.pose.header.frame_id not in ACCEPTED_FRAMES:
                 return self._refuse_frame(result, goal.pose.header.frame_id)
             position = goal.pose.pose.position
-            request = NavigateRequest(goal.location_name, (position.x, position.y, yaw_of(goal.pose)))
+            request = NavigateRequest(goal.location_name, (position.x, position.y, conv.yaw_of(goal.pose)))
             outcome = self.navigation.run(request, interruption,
                                           lambda progress: self._feedback(goal_handle, progress))
             result.error_code, result.error_msg = int(outcome.code), outcome.message
@@ -163,7 +147,7 @@ class NavigationNode(GoalNode):
         result = NavigateThroughPoses.Result()
 
         def run(interruption):
-            poses = tuple((p.pose.position.x, p.pose.position.y, yaw_of(p)) for p in goal.poses)
+            poses = tuple((p.pose.position.x, p.pose.position.y, conv.yaw_of(p)) for p in goal.poses)
             if not poses:
                 outcome = NavigateOutcome(Ending.FAILED, NavigateErrorCode.UNREACHABLE, 'the goal has no poses')
                 result.error_code, result.error_msg = int(outcome.code), outcome.message
@@ -186,7 +170,7 @@ class NavigationNode(GoalNode):
         return NavigateOutcome(Ending.FAILED, NavigateErrorCode.TF_ERROR, result.error_msg)
 
     def _feedback(self, goal_handle, progress: NavigateProgress, through: bool = False) -> None:
-        fields = dict(current_pose=pose_msg(progress.pose, self.get_clock().now().to_msg()),
+        fields = dict(current_pose=conv.pose_msg(progress.pose, self.get_clock().now().to_msg()),
                       navigation_time=duration_msg(progress.elapsed),
                       estimated_time_remaining=duration_msg(progress.time_remaining),
                       number_of_recoveries=int(progress.recoveries),

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from cap_mobile.layout import BASE_RADIUS, FURNITURE, ROOM_X_RANGE, ROOM_Y_RANGE, START_POSE, location
 
-from cap_control.navigation import (
+from cap_control.navigation.plan import (
     FollowerLimits, NavigateErrorCode, NavigationError, OccupancyGrid, PathFollower, follow_on_ideal_base,
     path_length, plan_path, wrap_angle,
 )

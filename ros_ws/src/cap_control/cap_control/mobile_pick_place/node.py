@@ -1,14 +1,14 @@
 """mobile_pick_place: the MobilePickPlace action (/cap/control/mobile_pick_place) for the mobile manipulator.
 
-The work is cap_control.mobile_executor's: this node binds its ports to ROS (the navigation node's Navigate
-action to bring the base within reach, the simulator's arm trajectory and gripper actions, the perception
+The work is cap_control.mobile_pick_place.executor's: this node binds its ports to ROS (the navigation node's
+Navigate action to bring the base within reach, the simulator's arm trajectory and gripper actions, the perception
 services, /joint_states for the arm and the base) and serves the action: pick an object, or put the held one down
 at a point (on the furniture there, or into a bin) or on another object; feedback per stage ("navigate", then the
 arm's); a cancel of the goal or a message on the stop topic interrupts the run (the base and the arm hold where
-they are). What it shares with the other nodes that move the arm is cap_control.arm_node's; the gripper and
-perception ports are pick_place's. Parameters: ExecutionConfig (timeouts); where the base may stand is the
-navigation node's own map (/cap/control/navigation/map), so its parameters decide that here too; goals wait for it
-like for the navigation action.
+they are). What it shares with the other nodes that move the arm (the arm, gripper and perception ports) is
+cap_control.skill_node's. Parameters: ExecutionConfig (timeouts); where the base may stand is the navigation node's
+own map (/cap/control/navigation/map), so its parameters decide that here too; goals wait for it like for the
+navigation action.
 """
 from __future__ import annotations
 
@@ -22,14 +22,13 @@ from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from rclpy.action import ActionServer
 
 from cap_control import ros_conversions as conv
-from cap_control.arm_node import ActionGoal, ArmNode, ArmPort, spin_node
-from cap_control.mobile_executor import (
+from cap_control.mobile_pick_place.executor import (
     TASK_PICK, TASK_PLACE_AT_OBJECT, TASK_PLACE_AT_POSITION, MobilePickPlaceExecutor, MobileRequest, Navigator,
 )
-from cap_control.navigation import OccupancyGrid
-from cap_control.pick_place_executor import ExecutionConfig
-from cap_control.pick_place_node import GripperPort, PerceptionPort
+from cap_control.navigation.plan import OccupancyGrid
+from cap_control.pick_place.executor import ExecutionConfig
 from cap_control.ports import PendingGoal
+from cap_control.skill_node import ActionGoal, ArmNode, ArmPort, GripperPort, PerceptionPort, spin_node
 from cap_interfaces.action import GripperCommand, MobilePickPlace, Navigate
 from cap_interfaces.msg import GraphNames
 
@@ -52,8 +51,7 @@ class _NavigatorPort(Navigator):
         return self._node.navigation_map()
 
     def go(self, pose: tuple[float, float, float]) -> PendingGoal:
-        from cap_control.navigation_node import pose_msg
-        goal = Navigate.Goal(pose=pose_msg(pose, self._node.get_clock().now().to_msg()))
+        goal = Navigate.Goal(pose=conv.pose_msg(pose, self._node.get_clock().now().to_msg()))
         return ActionGoal(self._node.navigate_client, goal, lambda result: (int(result.error_code),
                                                                             result.error_msg))
 

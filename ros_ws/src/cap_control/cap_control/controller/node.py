@@ -1,15 +1,17 @@
-"""controller_node: the RunController action, a generated controller function run at a fixed rate (control_loop.py).
+"""controller_node: the RunController action, a generated controller function run at a fixed rate.
 
-The loop is cap_control.control_loop's; this node binds its ports to ROS: the plant to the simulator's ControlStep
-service (lockstep stepping: the plant advances one period per request, so the rate holds in simulated time), the
-controller to lmp_node's CallController service (the function runs in lmp_node's sandbox process). The node owns
-the limits: the generated program cannot reach them. /cap/stop or a cancel ends the run at the next tick; every end
-releases the plant (made safe). GetPlantState answers a plant's state now, from /joint_states, packed as a
-controller would see it. Parameters: ControllerNodeConfig (control_loop.py).
+The loop is cap_control.controller.executor's, the run's checks and limits cap_control.controller.plan's; this node
+binds the loop's ports to ROS: the plant to the simulator's ControlStep service (lockstep stepping: the plant
+advances one period per request, so the rate holds in simulated time), the controller to lmp_node's CallController
+service (the function runs in lmp_node's sandbox process). The node owns the limits: the generated program cannot
+reach them. /cap/stop or a cancel ends the run at the next tick; every end releases the plant (made safe).
+GetPlantState answers a plant's state now, from /joint_states, packed as a controller would see it. Parameters:
+ControllerNodeConfig (cap_control.controller.plan), overridden in config/controller.yaml.
 
 Threading: the action's execute callback blocks for the whole run, so it needs a MultiThreadedExecutor (main()
-uses 4); the per-tick requests are sent asynchronously and awaited on events, never by spinning. The one-process
-graph may move the two per-tick clients onto a node of its events executor (`bind_quick`).
+spins one of 4 threads, cap_control.skill_node.spin_node); the per-tick requests are sent asynchronously and awaited
+on events, never by spinning. The one-process graph may move the two per-tick clients onto a node of its events
+executor (`bind_quick`).
 """
 from __future__ import annotations
 
@@ -17,17 +19,18 @@ import threading
 from typing import Any, Sequence
 
 import numpy as np
-import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Empty
 
-from cap_control.control_loop import (ControlLoop, ControllerFailure, ControllerNodeConfig, Limits, Outcome,
-                                      PlantError, Reading, RunError, Tick, make_run, percentile, state_vector)
+from cap_control.controller.executor import ControlLoop, Outcome, PlantError, Tick, percentile
+from cap_control.controller.plan import (
+    ControllerFailure, ControllerNodeConfig, Limits, Reading, RunError, make_run, state_vector,
+)
+from cap_control.skill_node import spin_node
 from cap_controllers import plants
 from cap_interfaces.action import RunController
 from cap_interfaces.msg import GraphNames
@@ -116,7 +119,7 @@ class ControllerNode(Node):
         self._stop = threading.Event()  # of the run in progress
         self._joints: dict[str, tuple[float, float]] = {}  # latest /joint_states: name -> (position, velocity)
         self._joints_lock = threading.Lock()
-        self.last_result: Any = None  # control_loop.Result of the last run
+        self.last_result: Any = None  # cap_control.controller.executor.Result of the last run
         self._first_joints = threading.Event()
         self.create_subscription(Empty, GraphNames.STOP_TOPIC, lambda _: self._stop.set(), STOP_QOS,
                                  callback_group=self._group)
@@ -234,19 +237,7 @@ class ControllerNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ControllerNode()
-        executor = MultiThreadedExecutor(num_threads=4)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(ControllerNode, args)
 
 
 if __name__ == '__main__':

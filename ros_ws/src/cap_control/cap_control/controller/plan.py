@@ -1,25 +1,16 @@
-"""The control loop of a generated controller: a fixed rate in simulated time, and limits the controller cannot reach.
+"""What a run of a generated controller may do, and the checks of every tick (plain Python, no ROS).
 
-Two ports, so that the loop runs the same against the simulator, a robot or fakes in tests:
-- `Plant`: `step(efforts, duration)` applies efforts (zero-order hold) and returns the reading `duration` seconds
-  of plant time later (the simulator steps in lockstep with the loop; 0 only reads); `release()` makes it safe.
-- `Controller`: `call(state, budget_s)` evaluates the generated function on a state vector; returns its output and
-  its own CPU time, or raises ControllerFailure (the function's exception, a stop past its budget, no answer).
-
-Every tick: read the plant, check its state against the limits, ask the controller, check the output (a finite
-number per actuator, not absurdly past the actuator's limit), clamp it to the limits, apply it for one period.
-The loop ends when the duration has run, on a stop request, on a limit violation, on a bad output or a failed call
-(an exception, an overrun, no answer), and on a plant that does not answer; in every case the plant is released
-(made safe) before `run` returns. No rclpy here (controller_node binds the ports to ROS).
+The controller node has no planning of its own; what it decides before and during a run is here: `make_run` turns
+a RunController request into a `Run` (a known plant, a rate, duration and time budget in range, limits that may
+only tighten the node's own `Limits`, which ControllerNodeConfig's parameters set), and each tick's state and output
+are checked against those limits (`state_violation`, `check_output`) on the state vector a controller is sent
+(`state_vector`). The loop that applies them is cap_control.controller.executor's.
 """
 from __future__ import annotations
 
 import dataclasses
-import enum
 import math
-import threading
-import time
-from typing import Callable, Protocol, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -27,17 +18,6 @@ from cap_control import kinematics
 from cap_controllers import plants
 from cap_ros_common.parameters import parameter
 from cap_controllers.plants import ArmState, PlantSpec
-
-
-class Outcome(enum.Enum):
-    """How a run ended (controller_node maps these to RunController's error codes)."""
-
-    SUCCESSFUL = 'successful'
-    STOPPED = 'stopped'
-    LIMIT_VIOLATED = 'limit_violated'
-    CONTROLLER_ERROR = 'controller_error'
-    OVERRUN = 'overrun'
-    PLANT_ERROR = 'plant_error'
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,26 +29,12 @@ class Reading:
     velocities: np.ndarray
 
 
-class PlantError(Exception):
-    """The plant did not answer or refused a step."""
-
-
 class ControllerFailure(Exception):
     """One call of the controller failed; `kind` is the exception's type name, or 'ControllerOverrun'."""
 
     def __init__(self, kind: str, message: str) -> None:
         super().__init__(message)
         self.kind = kind
-
-
-class Plant(Protocol):
-    def step(self, efforts: Sequence[float], duration: float) -> Reading: ...
-
-    def release(self) -> None: ...
-
-
-class Controller(Protocol):
-    def call(self, state: np.ndarray, budget_s: float) -> tuple[Sequence[float], float]: ...
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,30 +60,6 @@ class Run:
     duration: float  # [s of plant time]
     time_budget: float  # [s] of the function's own CPU time per call
     limits: Limits
-
-
-@dataclasses.dataclass
-class Result:
-    outcome: Outcome
-    message: str
-    simulated_time: float = 0.0
-    start_time: float = 0.0  # [s] the plant's clock at the first tick
-    calls: int = 0
-    saturated_calls: int = 0
-    call_seconds: list[float] = dataclasses.field(default_factory=list)  # wall time per call, as the loop saw it
-    function_seconds: list[float] = dataclasses.field(default_factory=list)  # the function's own CPU time
-    step_seconds: list[float] = dataclasses.field(default_factory=list)  # wall time per plant step
-    final_state: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
-
-
-@dataclasses.dataclass(frozen=True)
-class Tick:
-    """What feedback reports: plant time since the start, calls so far, the state and the output applied."""
-
-    time: float
-    calls: int
-    state: np.ndarray
-    output: np.ndarray
 
 
 @dataclasses.dataclass(frozen=True)
@@ -239,82 +181,5 @@ def check_output(plant: PlantSpec, name: str, output: object, limits: Limits) ->
     return clamped, bool(np.any(clamped != values))
 
 
-# ------------------------------------------------------------------------------------------------ the loop
-class ControlLoop:
-    """Runs one controller to its end (see the module docstring)."""
-
-    def __init__(self, plant: Plant, controller: Controller, clock: Callable[[], float] = time.perf_counter) -> None:
-        self.plant = plant
-        self.controller = controller
-        self._clock = clock
-
-    def run(self, run: Run, stop: threading.Event, feedback: Callable[[Tick], None] | None = None,
-            feedback_every: int = 10) -> Result:
-        result = Result(Outcome.SUCCESSFUL, '')
-        period = 1.0 / run.rate
-        ticks = max(1, int(round(run.duration * run.rate)))
-        plant = run.plant
-        output = np.zeros(len(plant.actuators))
-        try:
-            reading = self.plant.step([], 0.0)
-            start = result.start_time = reading.time
-            for tick in range(ticks + 1):
-                elapsed = reading.time - start
-                vector = state_vector(plant, elapsed, reading)
-                result.simulated_time, result.final_state = elapsed, vector
-                violation = state_violation(plant, vector, run.limits)
-                if violation:
-                    return self._end(result, Outcome.LIMIT_VIOLATED, f'{violation} at t = {elapsed:.2f} s')
-                if stop.is_set():
-                    return self._end(result, Outcome.STOPPED, f'stopped at t = {elapsed:.2f} s')
-                if tick == ticks:
-                    return self._end(result, Outcome.SUCCESSFUL, f'ran {run.controller} for {elapsed:.2f} s')
-                called = self._clock()
-                try:
-                    value, own = self.controller.call(vector, run.time_budget)
-                    if own > run.time_budget:  # the sandbox process stops the call at its budget; this is a backstop
-                        raise ControllerFailure('ControllerOverrun', f'{run.controller} took {own * 1000:.3g} ms, '
-                                                f'more than its time budget of {run.time_budget * 1000:.3g} ms')
-                    output, saturated = check_output(plant, run.controller, value, run.limits)
-                except ControllerFailure as failure:
-                    outcome = Outcome.OVERRUN if failure.kind == 'ControllerOverrun' else Outcome.CONTROLLER_ERROR
-                    return self._end(result, outcome, f'{failure} (call {tick + 1}, t = {elapsed:.2f} s)')
-                except ValueError as excess:
-                    return self._end(result, Outcome.LIMIT_VIOLATED, f'{excess} (t = {elapsed:.2f} s)')
-                result.call_seconds.append(self._clock() - called)
-                result.function_seconds.append(own)
-                result.calls += 1
-                result.saturated_calls += int(saturated)
-                if feedback is not None and tick % feedback_every == 0:
-                    feedback(Tick(elapsed, result.calls, vector, output))
-                stepped = self._clock()
-                reading = self.plant.step(output.tolist(), period)
-                result.step_seconds.append(self._clock() - stepped)
-        except PlantError as error:
-            return self._end(result, Outcome.PLANT_ERROR, str(error))
-        finally:
-            self._release(result)
-        return result  # not reached: the loop returns at its last tick
-
-    @staticmethod
-    def _end(result: Result, outcome: Outcome, message: str) -> Result:
-        result.outcome, result.message = outcome, message
-        return result
-
-    def _release(self, result: Result) -> None:
-        try:
-            self.plant.release()
-        except PlantError as error:  # the plant could not be told: say so, whatever the outcome was
-            result.message += f'; making the plant safe failed: {error}'
-            if result.outcome is Outcome.SUCCESSFUL:
-                result.outcome = Outcome.PLANT_ERROR
-
-
-def percentile(values: Sequence[float], share: float) -> float:
-    """The `share` (0-1) quantile of `values` (0 for none)."""
-    return float(np.quantile(np.asarray(values, dtype=float), share)) if len(values) else 0.0
-
-
-__all__ = ['ControlLoop', 'Controller', 'ControllerFailure', 'ControllerNodeConfig', 'Limits', 'Outcome', 'Plant',
-           'PlantError', 'Reading', 'Result', 'Run', 'RunError', 'Tick', 'check_output', 'make_run', 'percentile',
-           'state_vector', 'state_violation']
+__all__ = ['ControllerFailure', 'ControllerNodeConfig', 'Limits', 'Reading', 'Run', 'RunError', 'check_output',
+           'make_run', 'state_vector', 'state_violation']

@@ -2,8 +2,8 @@
 spot on a piece of furniture, and the arm's stages planned in the arm's own frame.
 
 The arm's frame is the UR5e's base frame on the mobile base (cap_mobile.robot.ARM_MOUNT): the kinematics and the
-table top's planning helpers (cap_control.pick_place) work in it unchanged; the checks of a plan (grasp width, the
-object lifted, where it ended) stay in the world frame, where perception reports. The base stands at one of the
+table top's planning helpers (cap_control.pick_place.plan) work in it unchanged; the checks of a plan (grasp width,
+the object lifted, where it ended) stay in the world frame, where perception reports. The base stands at one of the
 furniture's four sides, facing it, across from the object (`reach_pose`): the side whose spot is free for the base
 and nearest the object within the arm's reach. A pick grasps top-down across the object's narrower side and ends in
 the carry pose (the tool over the base, cap_mobile.robot.CARRY_TCP, the object hanging above the base's top); a
@@ -20,8 +20,8 @@ from typing import Sequence
 import numpy as np
 from cap_mobile import layout, robot
 
-from cap_control.navigation import OccupancyGrid, wrap_angle
-from cap_control.pick_place import (
+from cap_control.navigation.plan import OccupancyGrid, wrap_angle
+from cap_control.pick_place.plan import (
     GraspCheck, GripperStep, LiftCheck, ObjectInfo, PickPlaceConfig, PickPlaceError, PickPlaceErrorCode,
     PickPlacePlan, PlacedCheck, Stage, StageName, _Planner,
 )

@@ -1,7 +1,7 @@
 """Pick-and-place as a plan of stages: which motions, gripper commands and checks move an object onto a target.
 
 The plan is pure data computed before anything moves, so that an unreachable pose or a target outside the
-workspace is reported before the arm starts. The executor (cap_control.pick_place_executor) runs the stages:
+workspace is reported before the arm starts. The executor (cap_control.pick_place.executor) runs the stages:
 
     for stage in plan.stages:                      # feedback: stage.name; cancel is honoured between stages
         for step in stage.steps:

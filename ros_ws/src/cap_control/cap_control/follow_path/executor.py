@@ -1,6 +1,6 @@
 """Carrying out a FollowPath request over ports to the arm and the tool's spring (plain Python, no ROS).
 
-`PathExecutor.run` plans the whole path from the arm's joints before anything moves (cap_control.path_following:
+`PathExecutor.run` plans the whole path from the arm's joints before anything moves (cap_control.follow_path.plan:
 a path off the surface or out of reach fails with nothing moved), then runs its motions one by one, reporting each
 with the stroke, the points passed and the progress by length. With a touching tool it checks the tool's spring,
 which the robot reports as a joint: after each landing the compression must come into the tool's band (the tool
@@ -19,7 +19,7 @@ import numpy as np
 from cap_ros_common.parameters import parameter
 from cap_whiteboard import tool as tools
 
-from cap_control.path_following import (
+from cap_control.follow_path.plan import (
     TOOL_NONE, PathConfig, PathError, PathErrorCode, PathPlan, PathStep, StepKind, plan_path,
 )
 from cap_control.ports import (
@@ -64,7 +64,7 @@ class ToolSpring(abc.ABC):
 @dataclass(frozen=True)
 class PathRequest:
     strokes: Sequence[np.ndarray]  # each (N, 2): x, y [m]
-    tool: str  # path_following.TOOL_NONE, TOOL_MARKER or TOOL_ERASER
+    tool: str  # plan.TOOL_NONE, TOOL_MARKER or TOOL_ERASER (cap_control.follow_path.plan)
     speed: float = 0.0  # [m/s]; 0: the default
 
 

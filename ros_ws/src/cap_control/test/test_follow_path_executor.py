@@ -4,8 +4,8 @@ from concurrent.futures import Future
 
 import numpy as np
 
-from cap_control.path_executor import PathExecutor, PathRequest, PathTimeouts, ToolSpring
-from cap_control.path_following import PathErrorCode
+from cap_control.follow_path.executor import PathExecutor, PathRequest, PathTimeouts, ToolSpring
+from cap_control.follow_path.plan import PathErrorCode
 from cap_control.ports import Arm, ArmOutcome, ArmResult, Ending, Interruption, PendingGoal
 
 READY = np.array([0.8413, -2.2842, 1.7017, -0.9883, -1.5708, -0.7295])

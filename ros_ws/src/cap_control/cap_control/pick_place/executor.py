@@ -1,6 +1,6 @@
 """Carrying out a pick-and-place over ports to the arm, the gripper and perception (plain Python, no ROS).
 
-`PickPlaceExecutor.run` looks the object and target up, plans (cap_control.pick_place) before anything moves, then
+`PickPlaceExecutor.run` looks the object and target up, plans (cap_control.pick_place.plan) before anything moves, then
 runs the stages one by one, reporting each stage. A cancel or a stop (`Interruption`) cancels the running arm or
 gripper goal at once (the arm holds where it is) and ends the run with CANCELLED.
 
@@ -32,7 +32,7 @@ from cap_ros_common.parameters import parameter
 from cap_tabletop.cameras import CAMERAS, DEFAULT_CAMERA
 from cap_tabletop.workspace import REST_JOINTS
 
-from cap_control.pick_place import (
+from cap_control.pick_place.plan import (
     GripperStep, ObjectInfo, Observation, PickPlaceConfig, PickPlaceError, PickPlaceErrorCode, PickPlacePlan,
     Stage, StageName, TrajectoryStep, plan_pick_place,
 )

@@ -1,12 +1,12 @@
 """follow_path: the FollowPath action (draw, erase, or move over the work surface) over the arm's
 FollowJointTrajectory action.
 
-The work is cap_control.path_executor's: this node binds its ports to ROS (the arm's trajectory action, the tool's
-spring in /joint_states) and serves the action with it: feedback with the stage, the stroke, the points passed and
-the progress; a cancel of the goal or a message on the stop topic halts the arm where it is (the goal ends
-CANCELLED, aborted for a stop). A path off the surface or out of reach is refused before anything moves, with the
-fraction of it the arm could follow. Parameters are declared from PathConfig (nested: surface.x_min, ...) and
-PathTimeouts, whose fields hold every default.
+The work is cap_control.follow_path.executor's (planned by cap_control.follow_path.plan): this node binds its ports
+to ROS (the arm's trajectory action, the tool's spring in /joint_states) and serves the action with it: feedback with
+the stage, the stroke, the points passed and the progress; a cancel of the goal or a message on the stop topic halts
+the arm where it is (the goal ends CANCELLED, aborted for a stop). A path off the surface or out of reach is refused
+before anything moves, with the fraction of it the arm could follow. Parameters are declared from PathConfig
+(nested: surface.x_min, ...) and PathTimeouts, whose fields hold every default.
 """
 from __future__ import annotations
 
@@ -18,9 +18,9 @@ from cap_whiteboard import tool as tools
 from rclpy.action import ActionServer
 
 from cap_control import ros_conversions as conv
-from cap_control.arm_node import ArmNode, ArmPort, spin_node
-from cap_control.path_executor import PathExecutor, PathProgress, PathRequest, PathTimeouts, ToolSpring
-from cap_control.path_following import TOOL_ERASER, TOOL_MARKER, TOOL_NONE, PathConfig
+from cap_control.follow_path.executor import PathExecutor, PathProgress, PathRequest, PathTimeouts, ToolSpring
+from cap_control.follow_path.plan import TOOL_ERASER, TOOL_MARKER, TOOL_NONE, PathConfig
+from cap_control.skill_node import ArmNode, ArmPort, spin_node
 from cap_interfaces.action import FollowPath
 from cap_interfaces.msg import GraphNames
 
