@@ -1,4 +1,4 @@
-"""The demos: one module per domain (tabletop.py, whiteboard.py, mobile.py), each a sequence of
+"""The demos: one module per domain (tabletop.py, whiteboard.py, mobile.py, controllers.py), each a sequence of
 plain-language commands run through the whole graph in simulation and checked on the simulator's state.
 
 A demo is a plug-in of the entry-point group `cap_ros.demos` (name: its domain's name, value: its
