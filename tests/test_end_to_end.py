@@ -9,7 +9,7 @@ from std_msgs.msg import Empty
 
 from cap_interfaces.action import ExecuteCommand
 from cap_interfaces.msg import GraphNames
-from cap_bringup.demo import STEPS, run_demo
+from cap_bringup.demos.tabletop import STEPS, run_demo
 from cap_bringup.graph import Graph, GraphOptions
 from cap_lmp_ros.lmp_node import COMMAND_QOS
 from cap_lmp.testing.openai_server import ScriptedOpenAIServer

@@ -84,7 +84,7 @@ def test_a_put_away_episode_names_a_bin_by_colour_and_teaches_its_use_first():
 
 
 def test_no_prompt_holds_a_benchmark_instruction_or_a_demo_command():
-    from cap_bringup.mobile_demo import STEPS
+    from cap_bringup.demos.mobile import STEPS
     prompts = ' '.join(path.read_text().lower() for path in PROMPTS_DIR.glob('*.txt'))
     instructions = {i.lower().rstrip('?') for t in TEMPLATES for seed in range(50)
                     for i in sample_episode(t, seed).instructions}

@@ -65,7 +65,7 @@ def test_the_checker_passes_a_true_drawing_and_fails_a_shifted_or_partial_one():
 
 
 def test_no_prompt_holds_a_benchmark_instruction_or_a_demo_command():
-    from cap_bringup.whiteboard_demo import STEPS
+    from cap_bringup.demos.whiteboard import STEPS
     prompts = ' '.join(path.read_text().lower() for path in PROMPTS_DIR.glob('*.txt'))
     instructions = {i.lower() for t in TEMPLATES for seed in range(20) for i in sample_episode(t, seed).instructions}
     instructions |= {step.command.lower() for step in STEPS}

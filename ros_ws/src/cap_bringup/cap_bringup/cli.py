@@ -9,7 +9,7 @@
     cap approve [--reject]                           approve (or reject) the program waiting for approval
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
     cap urdf > ur5e_gripper.urdf                     the robot's URDF, as /robot_description carries it
-    cap demo [whiteboard|mobile]                     the table-top demo (cap_bringup/demo.py), or another domain's
+    cap demo [NAME]                                  a domain's demo (cap_bringup/demos; the table top's without NAME)
     cap bench tabletop --trials 1                    the paper's table-top benchmark (cap bench: the others)
 
 Every command takes --namespace (the graph's names are relative; `cap send --namespace robot1 "..."` talks to the
@@ -545,6 +545,39 @@ The paper's language-side tables through the engine and the sandbox process (no 
 BENCHMARK_GROUP = 'cap_ros.benchmarks'
 
 
+def demo_usage() -> str:
+    """`cap demo --help`: the demos installed (cap_bringup.demos), each with the first line of its description."""
+    from cap_bringup.demos import DEFAULT_DEMO, DEMOS
+
+    lines = ['usage: cap demo [NAME] [options]   (options: cap demo NAME --help)', '',
+             "A domain's plain-language commands through the whole graph in simulation, each checked on the "
+             "simulator's state.", 'NAME:']
+    for name in DEMOS.names():
+        try:
+            about = ' '.join((sys.modules[DEMOS.get(name).__module__].__doc__ or '').split('\n\n')[0].split())
+        except (ValueError, KeyError) as error:  # a broken demo is listed with what is wrong
+            about = str(error)
+        lines.append(f'  {name + (" (default)" if name == DEFAULT_DEMO else ""):22s}{about}')
+    return '\n'.join(lines) + '\n'
+
+
+def demo(argv: Sequence[str]) -> int:
+    """`cap demo [NAME] [options]`: runs the demo NAME (the table top's without one) with the options."""
+    from cap_bringup.demos import DEFAULT_DEMO, DEMOS
+
+    argv = [a for a in argv if a != '--']
+    if argv[:1] in (['-h'], ['--help'], ['help']):
+        print(demo_usage(), end='')
+        return EXIT_OK
+    name, options = (argv[0], argv[1:]) if argv and not argv[0].startswith('-') else (DEFAULT_DEMO, argv)
+    try:
+        run = DEMOS.get(name)
+    except ValueError as error:  # an unknown name, or a demo that cannot be loaded: one line, naming the known ones
+        _error(f'cap demo: error: {error}')
+        return EXIT_UNREACHABLE
+    return int(run(options))
+
+
 def benchmarks() -> dict[str, Any]:
     """The benchmarks packages above this one offer, by name (entry points of the group `cap_ros.benchmarks`).
 
@@ -602,9 +635,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     'cameras, commands, code, approval, stop')
     p_console.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
     p_console.add_argument('--port', type=int, default=8765, help='port on 127.0.0.1; 0: a free one [8765]')
-    commands.add_parser('demo', help='run the table-top demo, `cap demo whiteboard` the whiteboard session or `cap '
-                        'demo mobile` the mobile robot\'s commands (options: cap demo [whiteboard|mobile] --help)',
-                        add_help=False)
+    commands.add_parser('demo', help='run a domain\'s demo: `cap demo [NAME] [options]`, the table top\'s without '
+                        'NAME (the demos: cap demo --help)', add_help=False)
     commands.add_parser('bench', help='the paper\'s benchmarks: tabletop, codegen, humaneval, reasoning (cap bench '
                         '--help)', add_help=False)
     p_send = commands.add_parser('send', help='run a natural-language command and follow it to the end',
@@ -642,8 +674,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if hasattr(stream, 'reconfigure'):
             stream.reconfigure(errors='backslashreplace')
     if argv[:1] == ['demo']:
-        from cap_bringup import demo
-        return demo.main([a for a in argv[1:] if a != '--'])
+        return demo(argv[1:])
     if argv[:1] == ['bench']:
         return bench(argv[1:])
     args = build_parser().parse_args(argv)

@@ -1,4 +1,4 @@
-"""What a recorded base path says (visits, going round corners, clearance) and the map drawn from it."""
+"""What a recorded base path says (visits, going round corners, clearance)."""
 import numpy as np
 
 from cap_bringup import base_path
@@ -24,17 +24,3 @@ def test_a_place_counts_again_only_after_another_one_and_clearance_is_from_the_b
     path = _through((0.0, 0.0), (0.02, 0.0), (2.0, 0.0), (0.0, 0.0))
     assert base_path.visits(path, {'a': (0.0, 0.0), 'b': (2.0, 0.0)}) == ['a', 'b', 'a']
     assert base_path.clearance_from(path, (0.5, 0.3, 1.0, 0.8)) == 0.3
-
-
-def test_the_maps_legend_wraps_a_long_command_inside_the_picture(tmp_path):
-    import cv2
-
-    long = ('go in a 1.5m square around the barstool as many times as needed, check each step if there is a '
-            'banana, only stop moving when you see the banana')
-    room_width = int(np.ptp(base_path.layout.ROOM_X_RANGE) * base_path.PIXELS_PER_METRE)
-    lines = base_path._wrap(long, room_width)
-    assert len(lines) > 1 and ' '.join(lines) == long
-    assert all(cv2.getTextSize(line, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)[0][0] <= room_width for line in lines)
-    short = cv2.imread(str(base_path.draw_map([('go to the table', _through(*SQUARE))], tmp_path / 'a.png')))
-    wrapped = cv2.imread(str(base_path.draw_map([(long, _through(*SQUARE))], tmp_path / 'b.png')))
-    assert wrapped.shape[0] > short.shape[0] and wrapped.shape[1] == short.shape[1]

@@ -216,7 +216,9 @@ class SimBridgeNode(Node):
                 if self.lockstep.active:  # a controller steps the world; a silent one loses it, made safe
                     if self.lockstep.expired() and self.lockstep.release(silent=True):
                         self.get_logger().warning('a controller stopped stepping the world: its plant was made safe')
-                    self._woken.wait(0.01)
+                    # Not on _woken: a push sets it while the controller steps, and it stays set until the loop
+                    # runs freely again (waiting on it would spin for the rest of the run, slowing the steps).
+                    self._stop.wait(0.01)
                     pacer.restart()
                     continue
                 if self._woken.is_set():

@@ -14,27 +14,23 @@ Three templates, each episode fully determined by its seed:
   seed; the circle in the horizontal plane, starting at the tool's place and turning counter-clockwise seen from
   above, centred R to its -x side). Success: the tool's RMS distance from the moving goal over the last 5 s at most
   TRACK_RMS_LIMIT_M, and the run complete.
-These success definitions are this project's: the paper shows these controllers without numbers for them.
+These success definitions are this project's: the paper shows these controllers without numbers for them. The
+judges and their limits are cap_controllers.judging's (the controllers demo judges its runs with them too).
 """
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import Sequence
 
 import numpy as np
+from cap_controllers import judging
+from cap_controllers.judging import (OVERSHOOT_LIMIT_M, PUSH_DIRECTIONS, PUSH_DURATION_S, PUSH_FORCE, PUSH_START_S,
+                                     SETTLED_M, SETTLING_LIMIT_S, TRACK_PERIOD_S, TRACK_RMS_LIMIT_M, Verdict)
 
 BALANCE, PUSH, TRACK = 'balance', 'push', 'track'
 TEMPLATES = (BALANCE, PUSH, TRACK)
-PUSH_FORCE = 20.0  # [N]
-PUSH_START_S, PUSH_DURATION_S, PUSH_RUN_S = 1.0, 1.0, 8.0  # [s] of the run
-PUSH_DIRECTIONS = {'+x': (1, 0, 0), '-x': (-1, 0, 0), '+y': (0, 1, 0), '-y': (0, -1, 0), '+z': (0, 0, 1),
-                   '-z': (0, 0, -1)}
-SETTLED_M = 0.005  # [m] within this of the goal counts as back
-SETTLING_LIMIT_S = 2.0
-OVERSHOOT_LIMIT_M = 0.010
-TRACK_PERIOD_S, TRACK_RUN_S = 5.0, 10.0
-TRACK_RMS_LIMIT_M = 0.010
+PUSH_RUN_S = 8.0  # [s] of the run
+TRACK_RUN_S = 10.0
 # The paper's figure beside each template (percent), where it has one: its cart-pole PD controller balanced the
 # pole for the whole episode.
 PAPER = {BALANCE: 100.0, PUSH: None, TRACK: None}
@@ -99,73 +95,26 @@ def episode(template: str, seed: int, balance_seconds: float = 30.0) -> Controll
     raise ValueError(f'unknown template {template!r}; the templates are: {", ".join(TEMPLATES)}')
 
 
-@dataclasses.dataclass(frozen=True)
-class Verdict:
-    success: bool
-    reason: str  # why not, or the figures of a success
-    figures: dict[str, float]
-
-
 def judge_balance(episode: ControllerEpisode, ran_s: float, outcome: str) -> Verdict:
     """Balanced when the run lasted its whole duration (the controller node stops a fallen pole)."""
-    full = ran_s >= episode.duration_s - 1e-6
-    figures = {'balanced_s': round(ran_s, 3)}
-    if full and not outcome:
-        return Verdict(True, f'balanced for {ran_s:.1f} s', figures)
-    return Verdict(False, outcome or f'ran {ran_s:.2f} s of {episode.duration_s:g}', figures)
+    return judging.judge_balance(episode.duration_s, ran_s, outcome)
 
 
 def judge_push(episode: ControllerEpisode, times: Sequence[float], offsets: Sequence[Sequence[float]],
                outcome: str) -> Verdict:
     """`times` [s since the run started] and the tool's `offsets` from its held place [m]."""
-    times, offsets = np.asarray(times, dtype=float), np.asarray(offsets, dtype=float)
-    if outcome or not len(times):
-        return Verdict(False, outcome or 'no tool positions recorded', {})
-    direction = np.asarray(PUSH_DIRECTIONS[episode.push_direction], dtype=float)
-    end = PUSH_START_S + PUSH_DURATION_S
-    after = times >= end
-    errors = np.linalg.norm(offsets, axis=1)
-    along = offsets @ direction
-    peak = float(along[(times >= PUSH_START_S) & (times < end)].max(initial=0.0))
-    overshoot = float(max(0.0, -along[after].min(initial=0.0)))
-    outside = np.flatnonzero(after & (errors > SETTLED_M))
-    settling = float(times[outside[-1]] - end) if len(outside) else 0.0
-    final = float(errors[-1])
-    figures = {'peak_displacement_mm': round(peak * 1000, 2), 'overshoot_mm': round(overshoot * 1000, 2),
-               'settling_s': round(settling, 3), 'final_error_mm': round(final * 1000, 2)}
-    problems = []
-    if final > SETTLED_M:
-        problems.append(f'ended {final * 1000:.1f} mm from its goal')
-    if settling > SETTLING_LIMIT_S:
-        problems.append(f'took {settling:.2f} s to settle')
-    if overshoot > OVERSHOOT_LIMIT_M:
-        problems.append(f'overshot by {overshoot * 1000:.1f} mm')
-    if peak <= 0.0:
-        problems.append('did not yield to the push')
-    return Verdict(not problems, '; '.join(problems) or
-                   f'yielded {peak * 1000:.1f} mm, settled in {settling:.2f} s', figures)
+    return judging.judge_push(episode.push_direction, times, offsets, outcome)
 
 
 def circle_goal(episode: ControllerEpisode, start: Sequence[float], t: float) -> np.ndarray:
     """Where the tracking goal is at `t` seconds into the run, from the tool's start position."""
-    phase = 2 * math.pi * t / TRACK_PERIOD_S
-    return np.asarray(start, dtype=float) + episode.radius_m * np.array([math.cos(phase) - 1.0, math.sin(phase), 0.0])
+    return judging.circle_goal(episode.radius_m, start, t)
 
 
 def judge_track(episode: ControllerEpisode, times: Sequence[float], positions: Sequence[Sequence[float]],
                 start: Sequence[float], ran_s: float, outcome: str) -> Verdict:
     """`times` [s since the run started], the tool's `positions` [m] and where it started."""
-    if outcome or not len(times):
-        return Verdict(False, outcome or 'no tool positions recorded', {})
-    late = [(t, p) for t, p in zip(times, positions) if t >= episode.duration_s - TRACK_PERIOD_S]
-    if ran_s < episode.duration_s - 1e-6 or not late:
-        return Verdict(False, f'ran {ran_s:.2f} s of {episode.duration_s:g}', {})
-    errors = np.array([np.linalg.norm(np.asarray(p) - circle_goal(episode, start, t)) for t, p in late])
-    rms, worst = float(np.sqrt(np.mean(errors ** 2))), float(errors.max())
-    figures = {'rms_error_mm': round(rms * 1000, 2), 'max_error_mm': round(worst * 1000, 2)}
-    if rms > TRACK_RMS_LIMIT_M:
-        return Verdict(False, f'RMS error {rms * 1000:.1f} mm', figures)
-    return Verdict(True, f'RMS error {rms * 1000:.1f} mm', figures)
+    return judging.judge_track(episode.radius_m, episode.duration_s, times, positions, start, ran_s, outcome)
 
 
 __all__ = ['BALANCE', 'ControllerEpisode', 'OVERSHOOT_LIMIT_M', 'PAPER', 'PUSH', 'PUSH_DIRECTIONS', 'PUSH_DURATION_S',

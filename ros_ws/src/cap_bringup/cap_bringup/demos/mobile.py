@@ -14,15 +14,11 @@ command did what it should; 130 on Ctrl-C (the graph is closed first).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
-import os
 import pathlib
 import re
 import sys
 import threading
-import time
 from dataclasses import dataclass
 from typing import Callable
 
@@ -30,9 +26,9 @@ import numpy as np
 from cap_mobile import layout, objects as mobile_objects, robot
 
 from cap_bringup import base_path
-from cap_bringup.demo import VideoRecorder, _call, _wait
-from cap_lmp.local_server import MODEL_READY_TIMEOUT_S
-from cap_lmp.safe_text import terminal_text
+from cap_bringup.demos._mobile_map import draw_map
+from cap_bringup.demos._support import DemoRun, SimulatedClockSampler, demo_parser, outcome_problems, \
+    placed_objects, run_main
 
 Path = np.ndarray  # (N, 2) the base's x, y while a command ran
 Objects = list  # the simulator's object states when the command ended
@@ -180,26 +176,17 @@ SCENE = {'coke can': (1.4, 0.85), 'apple': (1.7, 0.72), 'orange': (2.5, 0.72), '
          'chips bag': (2.3, 0.75), 'water bottle': (3.0, -2.3), 'sprite can': (-1.0, 2.55)}
 
 
-class PathRecorder:
+class PathRecorder(SimulatedClockSampler):
     """The base's x, y every `period` of simulated time, read from the simulator in a thread of its own."""
 
     def __init__(self, world, period: float = 0.05) -> None:
-        self.world, self.period = world, period
         self.points: list[np.ndarray] = []
         self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name='demo_path', daemon=True)
-        self._thread.start()
+        super().__init__(world, period, 'demo_path')
 
-    def _run(self) -> None:
-        next_time = self.world.time
-        while not self._stop.is_set():
-            if self.world.time < next_time:
-                time.sleep(0.002)
-                continue
-            with self._lock:
-                self.points.append(self.world.base_pose()[:2].copy())
-            next_time += self.period
+    def sample(self) -> None:
+        with self._lock:
+            self.points.append(self.world.base_pose()[:2].copy())
 
     def take(self) -> Path:
         """The points since the last take (at least the base's position now)."""
@@ -207,120 +194,43 @@ class PathRecorder:
             points, self.points = self.points, []
         return np.array(points + [self.world.base_pose()[:2].copy()])
 
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(10)
-
 
 def run_demo(out_dir: pathlib.Path, backend: str = 'cassette', cassette: str = '', steps=STEPS,
              video: bool = True, log=print) -> dict:
     """Run the commands; return the summary (also written to out_dir/summary.json)."""
-    import rclpy
-    from cap_ros_common.actions import ActionClient
-    from rclpy.context import Context
-    from std_msgs.msg import String
-
-    from geometry_msgs.msg import Point
-
-    from cap_interfaces.action import ExecuteCommand
-    from cap_interfaces.msg import GraphNames, ObjectSpec
-    from cap_interfaces.srv import ResetScene
-
-    from cap_bringup.graph import Graph, GraphOptions
-    from cap_lmp_ros.lmp_node import outcome_name
-
-    out_dir.mkdir(parents=True, exist_ok=True)
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    context = Context()
-    rclpy.init(context=context)
-    graph = Graph(context, GraphOptions(domain='mobile', llm_backend=backend, cassette=cassette, camera_rate=0.0))
-    user = rclpy.create_node('mobile_demo', context=context)
-    graph.executor.add_node(user)
-    said: list[str] = []
-    user.create_subscription(String, GraphNames.SAY_TOPIC, lambda m: said.append(m.data), 50)
-    execute = ActionClient(user, ExecuteCommand, GraphNames.EXECUTE_ACTION)
-    reset = user.create_client(ResetScene, GraphNames.SIM_RESET_SERVICE)
-    summary: dict = {'output': str(out_dir), 'steps': []}
-    recorder = video_recorder = None
     paths: list[tuple[str, Path]] = []
-    started = time.monotonic()
-    try:
-        _wait(lambda: execute.server_is_ready() and reset.service_is_ready(), 30, 'the graph to come up')
-        answer = _call(reset.call_async(ResetScene.Request(seed=0, objects=[
-            ObjectSpec(name=name, use_position=True, position=Point(x=xy[0], y=xy[1])) for name, xy in SCENE.items()])),
-            30, 'the scene reset')
-        if not answer.success:
-            raise RuntimeError(f'scene reset failed: {answer.message}')
-        if backend == 'local':
-            log('waiting for the local model to load and read its prompts ...')
-            _wait(graph.nodes['lmp_node'].model_ready.is_set, MODEL_READY_TIMEOUT_S, 'the local model')
-        recorder = PathRecorder(graph.world)
-        if video:
-            video_recorder = VideoRecorder(graph.world, out_dir / 'demo.mp4', period=0.4, camera=robot.FOLLOW_CAMERA)
-        for index, step in enumerate(steps, start=1):
-            log(f'\n[{index}/{len(steps)}] > {terminal_text(step.command)}')
-            said.clear()
+
+    def draw() -> None:
+        if paths:
+            run.summary['map'] = str(draw_map(paths, out_dir / 'map.png'))
+
+    with DemoRun(out_dir, len(steps), name='mobile_demo', log=log, video=video, domain='mobile',
+                 llm_backend=backend, cassette=cassette, camera_rate=0.0) as run:
+        run.reset_scene(placed_objects(SCENE))
+        run.wait_for_model()
+        run.closing(draw)
+        recorder = PathRecorder(run.world)
+        run.closing(recorder.close)
+        run.record_video(robot.FOLLOW_CAMERA, period=0.4)
+        for step in steps:
             recorder.take()
-            sim_started, wall_started = graph.world.time, time.monotonic()
-            goal = _call(execute.send_goal_async(ExecuteCommand.Goal(command=step.command)), 30,
-                         'lmp_node to accept the command')
-            result = _call(goal.get_result_async(), 900, 'the command to finish').result
-            # The last words arrive on the say topic just after the result: wait for them briefly.
-            time.sleep(0.2)
+            ran = run.run_command(step.command)
             path = recorder.take()
             paths.append((step.command, path))
-            outcome = outcome_name(result.outcome)
-            problems = [] if outcome == 'done' else [f'ended {outcome}: {result.message}']
-            objects = graph.world.object_states()
-            problems += [p for p in (check(path, list(said), objects) for check in step.checks) if p]
-            log('code:\n' + '\n'.join('    ' + line for line in terminal_text(result.code).splitlines()))
-            for text in said:
-                log(f'robot says: {terminal_text(text)}')
+            objects = run.world.object_states()
+            problems = outcome_problems(ran) + [p for p in (check(path, ran.said, objects) for check in step.checks)
+                                                if p]
             travelled = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))) if len(path) > 1 else 0.0
-            log(f'outcome: {outcome}; drove {travelled:.1f} m in {graph.world.time - sim_started:.1f} s simulated, '
-                f'{time.monotonic() - wall_started:.1f} s wall')
-            log('as asked: ' + ('yes' if not problems else 'NO: ' + terminal_text('; '.join(problems))))
-            summary['steps'].append({'command': step.command, 'outcome': outcome, 'as_expected': not problems,
-                                     'problems': problems, 'code': result.code, 'said': list(said),
-                                     'travelled_m': travelled, 'sim_seconds': graph.world.time - sim_started,
-                                     'wall_seconds': time.monotonic() - wall_started})
-    finally:
-        if video_recorder is not None:
-            video_recorder.close()
-            summary['video'] = str(out_dir / 'demo.mp4')
-            summary['video_frames'] = video_recorder.frames
-        if recorder is not None:
-            recorder.close()
-        if paths:
-            summary['map'] = str(base_path.draw_map(paths, out_dir / 'map.png'))
-        graph.close()
-        user.destroy_node()
-        context.try_shutdown()
-    summary['all_as_expected'] = all(s['as_expected'] for s in summary['steps']) and \
-        len(summary['steps']) == len(steps)
-    summary['wall_seconds'] = time.monotonic() - started
-    (out_dir / 'summary.json').write_text(json.dumps(summary, indent=2))
-    return summary
+            run.report(ran, problems, f'drove {travelled:.1f} m', travelled_m=travelled)
+    return run.summary
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog='cap demo mobile', description=__doc__.split('\n\n')[0])
-    parser.add_argument('--out', type=pathlib.Path,
-                        default=pathlib.Path('output') / time.strftime('mobile-%Y%m%d-%H%M%S'))
-    parser.add_argument('--backend', choices=('cassette', 'http', 'local'), default='cassette',
-                        help='cassette (the reference programs, default), http (CAP_LLM_BASE_URL) or local')
-    parser.add_argument('--cassette', default='', help='cassette to replay (default: the mobile reference one)')
-    parser.add_argument('--no-video', action='store_true')
-    args = parser.parse_args(argv)
-    try:
-        summary = run_demo(args.out, args.backend, args.cassette, video=not args.no_video)
-    except KeyboardInterrupt:
-        print('interrupted (SIGINT)', file=sys.stderr)
-        return 130
-    good = sum(s['as_expected'] for s in summary['steps'])
-    print(f'\n{good}/{len(STEPS)} commands did what was asked in {summary["wall_seconds"]:.0f} s.')
-    print(f'The map, the video and summary.json are in {summary["output"]}')
-    return 0 if summary['all_as_expected'] else 1
+    parser = demo_parser('cap demo mobile', __doc__.split('\n\n')[0], 'mobile',
+                         'cassette to replay [the mobile domain\'s reference one]')
+    return run_main(parser, argv, lambda args: run_demo(args.out, args.backend, args.cassette,
+                                                        video=not args.no_video),
+                    'did what was asked', 'The map, the video and summary.json are')
 
 
 if __name__ == '__main__':
