@@ -23,20 +23,21 @@ import time
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-from cap_bench.runner import (  # noqa: E402  (after the environment is set)
-    BenchOptions, EpisodeGraph, _EpisodeRunner, episode_key, sample_episode, write_oracle_cassette,
-)
-from cap_bench.templates import GROUPS  # noqa: E402
+from cap_bench.tabletop.bench import write_oracle_cassette  # noqa: E402  (after the environment is set)
+from cap_bench.tabletop.options import TabletopOptions  # noqa: E402
+from cap_bench.tabletop.runner import TabletopRunner, episode_graph  # noqa: E402
+from cap_bench.tabletop.sampling import episode_for_key, sample_episode  # noqa: E402
+from cap_bench.tabletop.templates import GROUPS  # noqa: E402
 
 
 def _job(name: str, keys: list[str], domain_id: int, cpu: int, cassette: str, results) -> None:
     os.environ['ROS_DOMAIN_ID'] = str(domain_id)
-    options = BenchOptions(trials=len(keys), jobs=1)
-    graph = EpisodeGraph(options, lambda: _EpisodeRunner(options, pathlib.Path(cassette), cpu=cpu))
+    options = TabletopOptions(trials=len(keys), jobs=1)
+    graph = episode_graph(options, lambda: TabletopRunner(options, pathlib.Path(cassette), cpu=cpu))
     try:
         for key in keys:
             started = time.monotonic()
-            record = graph.run(key)
+            record = graph.run(episode_for_key(key))
             results.put((name, key, started, time.monotonic(), record['sim_seconds'], record['success']))
     finally:
         graph.close()
@@ -57,7 +58,7 @@ def main() -> None:
     # The benchmark's rows in turn (every template, seeds counting up), as a run's jobs take them.
     rows = [(group, template) for group, (_, templates) in GROUPS.items() for template in templates]
     episodes = [sample_episode(*rows[i % len(rows)], i // len(rows)) for i in range(args.long + args.short)]
-    keys = [episode_key(e.group, e.template, e.seed) for e in episodes]
+    keys = [e.key for e in episodes]
     with tempfile.TemporaryDirectory() as folder:
         cassette = pathlib.Path(folder) / 'oracle.yaml'
         write_oracle_cassette(episodes, cassette)

@@ -2,15 +2,16 @@
 (started on 127.0.0.1, stopped at the end), with the same records, report and --resume."""
 import json
 
-from cap_bench.runner import BenchOptions, load_records, run_benchmark
+from cap_bench.tabletop.bench import load_records, run_benchmark
+from cap_bench.tabletop.options import TabletopOptions
 
 # Four episodes for two jobs taking them from one queue: every task brings up a graph and streams records back.
 TASKS = ('pick_place', 'stack')
 
 
 def _run(out, executor: str, domain_id: int, resume: bool = False) -> dict:
-    return run_benchmark(BenchOptions(groups=('SA-SI',), tasks=TASKS, trials=2, jobs=2, out=str(out),
-                                      executor=executor, resume=resume, first_domain_id=domain_id),
+    return run_benchmark(TabletopOptions(groups=('SA-SI',), tasks=TASKS, trials=2, jobs=2, out=str(out),
+                                         executor=executor, resume=resume, first_domain_id=domain_id),
                          show_progress=False)
 
 
@@ -64,7 +65,7 @@ def test_the_ray_executor_runs_the_local_executors_episodes_and_resumes(ros_isol
 
 
 def test_the_runs_own_ray_instance_is_on_loopback():
-    from cap_bench import ray_executor
+    from cap_bench.tabletop import ray_executor
 
     ray = ray_executor.start('', jobs=2)
     try:

@@ -4,15 +4,16 @@ import json
 
 import pytest
 
-from cap_bench.episodes import sample_episode
-from cap_bench.oracle import oracle_program
-from cap_bench.runner import BenchOptions, load_records, run_benchmark
+from cap_bench.tabletop.bench import load_records, run_benchmark
+from cap_bench.tabletop.options import TabletopOptions
+from cap_bench.tabletop.oracle import oracle_program
+from cap_bench.tabletop.sampling import sample_episode
 from cap_lmp.testing.openai_server import ScriptedOpenAIServer, last_query_line
 
 
 @pytest.mark.slow
 def test_one_oracle_episode_per_task_and_group(ros_isolation, tmp_path):
-    summary = run_benchmark(BenchOptions(trials=1, out=str(tmp_path), first_domain_id=int(ros_isolation)),
+    summary = run_benchmark(TabletopOptions(trials=1, out=str(tmp_path), first_domain_id=int(ros_isolation)),
                             show_progress=False)
     records = load_records(tmp_path)
     assert len(records) == 22 == summary['episodes']
@@ -40,9 +41,9 @@ def test_llm_policy_runs_episodes_end_to_end_against_an_endpoint(ros_isolation, 
         return programs.get(query)
 
     with ScriptedOpenAIServer(responder=responder) as server:
-        summary = run_benchmark(BenchOptions(policy='llm', groups=('SA-SI',), tasks=tasks, trials=1,
-                                             out=str(tmp_path), base_url=server.base_url, model=server.model,
-                                             first_domain_id=int(ros_isolation)), show_progress=False)
+        summary = run_benchmark(TabletopOptions(policy='llm', groups=('SA-SI',), tasks=tasks, trials=1,
+                                                out=str(tmp_path), base_url=server.base_url, model=server.model,
+                                                first_domain_id=int(ros_isolation)), show_progress=False)
         asked = [last_query_line(r.prompt) for r in server.requests]
     records = load_records(tmp_path)
     assert [r['success'] for r in records] == [True, True], [r['reason'] for r in records]

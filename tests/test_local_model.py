@@ -12,7 +12,8 @@ import pytest
 
 from cap_bench.devset.bench import _episode_judge
 from cap_bench.devset.commands import BY_KEY
-from cap_bench.runner import BenchOptions, _EpisodeRunner
+from cap_bench.tabletop.options import TabletopOptions
+from cap_bench.tabletop.runner import TabletopRunner
 from cap_lmp.local_server import local_model_installed
 from conftest import next_domain_id
 
@@ -31,14 +32,14 @@ def local_graph():
     with pytest.MonkeyPatch.context() as env:
         env.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
         env.setenv('ROS_DOMAIN_ID', str(next_domain_id()))
-        runner = _EpisodeRunner(BenchOptions(policy='llm', backend='local', episode_timeout_s=300.0), None)
+        runner = TabletopRunner(TabletopOptions(policy='llm', backend='local', episode_timeout_s=300.0), None)
         try:
             yield runner
         finally:
             runner.close()
 
 
-def run(runner: _EpisodeRunner, key: str) -> dict:
+def run(runner: TabletopRunner, key: str) -> dict:
     command = BY_KEY[key]
     return runner.run(command.episode(), judge=_episode_judge(command), instructions=command.instructions)
 
@@ -70,8 +71,8 @@ def test_the_servers_death_mid_command_is_a_clear_error_and_the_server_comes_bac
     goal_future = local_graph.execute.send_goal_async(
         local_graph.ExecuteCommand.Goal(command='put the red block in the blue bowl'),
         feedback_callback=kill_while_generating)
-    goal = local_graph._call(goal_future, 30, 'lmp_node (goal)')
-    result = local_graph._call(goal.get_result_async(), 300, 'lmp_node (result)').result
+    goal = local_graph.call(goal_future, 30, 'lmp_node (goal)')
+    result = local_graph.call(goal.get_result_async(), 300, 'lmp_node (result)').result
     assert result.outcome == local_graph.ExecuteCommand.Result.OUTCOME_MODEL_ERROR
     assert 'the local model server stopped during the request (exit code -9)' in result.message
     assert 'send the command again' in result.message

@@ -343,7 +343,7 @@ CORNERS = list(TABLE_CORNERS.values())
 def test_fifty_random_single_pick_and_place_episodes(ros_context, spin_until, source, required, agreement):
     """50 seeded episodes of the default scene: a random block onto a random bowl, block or free corner.
 
-    Success as the benchmark defines "on / in" (cap_bench/success.py): within 0.06 m of a bowl's or corner's
+    Success as the benchmark defines "on / in" (cap_bench/tabletop/success.py): within 0.06 m of a bowl's or corner's
     centre, within 0.04 m of a block and higher than it; and no other object moved more than 0.05 m. Required: at
     least 49 of 50 with the simulator's ground truth as perception, 48 of 50 with the RGB-D colour detector on the
     top camera.

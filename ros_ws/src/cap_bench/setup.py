@@ -1,13 +1,21 @@
+from pathlib import Path
+
 from setuptools import find_packages, setup
 
 package_name = 'cap_bench'
+FOLDERS = sorted(path for path in Path(package_name).iterdir() if (path / '__init__.py').is_file())
+# Every folder with a bench.py is a benchmark, offered by the folder's name, so none is forgotten in a list.
+BENCHMARKS = [folder.name for folder in FOLDERS if (folder / 'bench.py').is_file()]
+# What a folder holds besides Python (e.g. prompts/*.txt) is loaded relative to its modules: it travels with them.
+DATA = {f'{package_name}.{folder.name}': sorted({(path.parent.relative_to(folder) / f'*{path.suffix}').as_posix()
+                                                 for path in folder.rglob('*') if path.is_file()
+                                                 and path.suffix not in ('.py', '.pyc')}) for folder in FOLDERS}
 
 setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={'cap_bench.codegen': ['prompts/*.txt'], 'cap_bench.humaneval': ['prompts/*.txt'],
-                  'cap_bench.reasoning': ['prompts/*.txt']},
+    package_data={module: patterns for module, patterns in DATA.items() if patterns},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -23,16 +31,7 @@ setup(
     entry_points={
         'console_scripts': [
         ],
-        # `cap bench tabletop` (cap_bringup's command line finds benchmarks through this group).
-        'cap_ros.benchmarks': [
-            'tabletop = cap_bench.runner:main',
-            'whiteboard = cap_bench.whiteboard.bench:main',
-            'mobile = cap_bench.mobile.bench:main',
-            'codegen = cap_bench.codegen.bench:main',
-            'humaneval = cap_bench.humaneval.bench:main',
-            'reasoning = cap_bench.reasoning.bench:main',
-            'devset = cap_bench.devset.bench:main',
-            'controllers = cap_bench.controllers.bench:main',
-        ],
+        # `cap bench NAME` (cap_bringup's command line finds benchmarks through this group).
+        'cap_ros.benchmarks': [f'{name} = {package_name}.{name}.bench:main' for name in BENCHMARKS],
     },
 )

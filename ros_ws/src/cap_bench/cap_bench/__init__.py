@@ -1,1 +1,2 @@
-"""The paper's simulated table-top benchmark: episodes, instructions, success checks and oracle programs."""
+"""The Code as Policies benchmarks, one folder a benchmark (its bench.py is `cap bench <folder>`); the modules here
+are what several of them share."""

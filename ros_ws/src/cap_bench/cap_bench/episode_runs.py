@@ -1,16 +1,19 @@
-"""What the domain benchmarks that run their episodes one after another through one in-process graph share (the
-whiteboard's and the mobile kitchen's): the lmp_node parameters of a policy, the records file, and the loop that
-runs the episodes, writes each record as it ends, and replaces a graph that stopped answering. No rclpy here."""
+"""What the benchmarks that run their episodes one after another through a graph share: the graph that replaces
+itself when it stops answering, the records file, the oracle's cassette, and the loop of the whiteboard's and the
+mobile kitchen's runs (run the episodes, write each record as it ends, resume where a run stopped). No rclpy here."""
 from __future__ import annotations
 
 import json
-import os
 import pathlib
 import sys
 import time
-from typing import Any, Callable, Protocol, Sequence
+from typing import IO, Any, Callable, Iterable, Protocol, Sequence
 
-from cap_bench.runner import BenchOptions, domain_ids
+import yaml
+
+from cap_bench.bench_options import BenchOptions
+from cap_bench.ros_domains import domain_ids, use_own_domain
+from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT, HAND_WRITTEN, normalise_query
 from cap_lmp.safe_text import terminal_text
 
 EPISODES = 'episodes.jsonl'
@@ -23,19 +26,76 @@ class EpisodeRunner(Protocol):
     def close(self) -> None: ...
 
 
-def lmp_parameters(options: BenchOptions) -> tuple[str, dict[str, Any]]:
-    """(llm backend, lmp_node parameters) of the run's policy: the cassette for the oracle, else the model's."""
-    lmp: dict[str, Any] = {'time_limit_s': options.episode_timeout_s}
-    backend = 'cassette' if options.policy == 'oracle' else options.backend
-    if backend == 'local':
-        lmp.update(model_file=options.model_file, model_threads=options.model_threads)
-    elif options.policy == 'llm':
-        lmp.update(api=options.api)
-        if options.base_url:
-            lmp['base_url'] = options.base_url
-        if options.model:
-            lmp['model'] = options.model
-    return backend, lmp
+class EpisodeGraph:
+    """Episodes run one at a time on a graph from `make_runner()`, built at once.
+
+    A graph that stops answering (a service or a goal without an answer in time: TimeoutError) costs its episode,
+    recorded as `failed(episode, error)` says, not the rest of the run: it is closed, and the next episodes run on a
+    new one.
+    """
+
+    def __init__(self, make_runner: Callable[[], EpisodeRunner],
+                 failed: Callable[[Any, TimeoutError], dict]) -> None:
+        self.make_runner, self.failed = make_runner, failed
+        self.runner: EpisodeRunner | None = make_runner()
+        self.built = 1
+
+    def run(self, episode: Any) -> dict:
+        """The episode's record."""
+        try:
+            return self.runner.run(episode)
+        except TimeoutError as error:
+            record = self.failed(episode, error)
+            self.runner.close()
+            self.runner = None
+            self.runner = self.make_runner()
+            self.built += 1
+            return record
+
+    def close(self) -> None:
+        if self.runner is not None:
+            self.runner.close()
+            self.runner = None
+
+
+def write_record(out: IO[str], record: dict) -> None:
+    """Append `record` to an episodes*.jsonl file, at once (a run stopped later keeps it)."""
+    out.write(json.dumps(record) + '\n')
+    out.flush()
+
+
+def show_progress(index: int, total: int, key: str, record: dict, seconds: float) -> None:
+    """One line on stderr as an episode ends: '[3/20] key: ok (12.5 s)', or its failure's reason."""
+    verdict = 'ok' if record['success'] else f"FAILED: {terminal_text(record['reason'], limit=300)}"
+    print(f'[{index}/{total}] {key}: {verdict} ({seconds:.1f} s)', file=sys.stderr, flush=True)
+
+
+def write_cassette(entries: Iterable[dict], path: pathlib.Path) -> None:
+    """A cassette of the oracle's reference programs (cap_lmp.cassette's format), for lmp_node to replay."""
+    path.write_text(yaml.safe_dump({'format': CASSETTE_FORMAT, 'entries': list(entries)}, sort_keys=False,
+                                   width=120), encoding='utf-8')
+
+
+def write_oracle_cassette(episodes: Sequence[Any], path: pathlib.Path, lmp: str, bench: str,
+                          program: Callable[[str], str]) -> None:
+    """One reference program (`program(instruction)`) per distinct instruction of the episodes, for the LMP `lmp`
+    that receives a user's instruction; `bench` names the benchmark in each entry's source."""
+    entries = {}
+    for episode in episodes:
+        for instruction in episode.instructions:
+            entries[normalise_query(instruction)] = {
+                'lmp': lmp, 'query': instruction, 'context': '*',
+                'source': f'{HAND_WRITTEN} (cap_bench {bench}, {episode.template})',
+                'completion': program(instruction)}
+    write_cassette(entries.values(), path)
+
+
+def episode_record(episode: Any, options: BenchOptions) -> dict:
+    """An episode's record before it ran: not a success (episodes of instructions in a scene of named objects)."""
+    return {'key': episode.key, 'template': episode.template, 'seed': episode.seed,
+            'instructions': list(episode.instructions), 'policy': options.policy, 'success': False, 'reason': '',
+            'code': '', 'outcome': '', 'sim_seconds': 0.0, 'wall_seconds': 0.0, 'model_calls': 0,
+            'objects': {o.name: list(o.xy) for o in episode.objects}}
 
 
 def load_records(out: pathlib.Path) -> list[dict]:
@@ -52,9 +112,8 @@ def load_records(out: pathlib.Path) -> list[dict]:
 
 
 def run_episodes(options: BenchOptions, episodes: Sequence[Any], resume: bool,
-                 write_cassette: Callable[[Sequence[Any], pathlib.Path], None],
-                 make_runner: Callable[[BenchOptions, pathlib.Path | None], EpisodeRunner],
-                 base_record: Callable[[Any, BenchOptions], dict]) -> float:
+                 write_oracle: Callable[[Sequence[Any], pathlib.Path], None],
+                 make_runner: Callable[[BenchOptions, pathlib.Path | None], EpisodeRunner]) -> float:
     """Run the episodes not recorded yet (all of them without `resume`) through one graph, appending each record to
     episodes.jsonl as it ends; returns the wall time taken [s]. The oracle's cassette is written first."""
     out = pathlib.Path(options.out)
@@ -66,31 +125,21 @@ def run_episodes(options: BenchOptions, episodes: Sequence[Any], resume: bool,
     cassette = None
     if options.policy == 'oracle':
         cassette = out / CASSETTE
-        write_cassette(episodes, cassette)
-    os.environ['ROS_DOMAIN_ID'] = str(domain_ids(1, options.first_domain_id)[0])
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        write_oracle(episodes, cassette)
+    use_own_domain(domain_ids(1, options.first_domain_id)[0])
     started = time.monotonic()
-    runner = make_runner(options, cassette) if todo else None
+
+    def failed(episode: Any, error: TimeoutError) -> dict:
+        return {**episode_record(episode, options), 'reason': f'the graph stopped answering ({error})'}
+
+    graph = EpisodeGraph(lambda: make_runner(options, cassette), failed) if todo else None
     try:
         with open(out / EPISODES, 'a', encoding='utf-8') as stream:
             for index, episode in enumerate(todo, 1):
-                try:
-                    record = runner.run(episode)
-                except TimeoutError as error:  # the graph stopped answering: this episode fails, a new graph goes on
-                    record = base_record(episode, options)
-                    record['reason'] = f'the graph stopped answering ({error})'
-                    runner.close()
-                    runner = None
-                    runner = make_runner(options, cassette)
-                stream.write(json.dumps(record) + '\n')
-                stream.flush()
-                verdict = 'ok' if record['success'] else f"FAILED: {terminal_text(record['reason'], limit=300)}"
-                print(f"[{index}/{len(todo)}] {episode.key}: {verdict} ({record['wall_seconds']:.1f} s)",
-                      file=sys.stderr, flush=True)
+                record = graph.run(episode)
+                write_record(stream, record)
+                show_progress(index, len(todo), episode.key, record, record['wall_seconds'])
     finally:
-        if runner is not None:
-            runner.close()
+        if graph is not None:
+            graph.close()
     return time.monotonic() - started
-
-
-__all__ = ['CASSETTE', 'EPISODES', 'lmp_parameters', 'load_records', 'run_episodes']

@@ -7,11 +7,11 @@ import re
 import numpy as np
 import pytest
 
-from cap_bench import table
+from cap_bench.tabletop import table
 from cap_bench.devset.bench import item_record, main, run_devset, summarise, write_oracle_cassette
 from cap_bench.devset.commands import COMMANDS, DevCommand, select
-from cap_bench.runner import BenchOptions
-from cap_bench.templates import ATTRIBUTE_POOLS, SEEN_COLORS, TEMPLATES, UNSEEN_TEMPLATES
+from cap_bench.tabletop.options import TabletopOptions
+from cap_bench.tabletop.templates import ATTRIBUTE_POOLS, SEEN_COLORS, TEMPLATES, UNSEEN_TEMPLATES
 from cap_lmp.cassette import Cassette
 from cap_lmp.sandbox import Sandbox
 from cap_lmp_ros.testing.table import Table
@@ -181,7 +181,7 @@ def test_summary_counts_passes_and_lists_failures():
     command = COMMANDS[0]
     good = item_record(command, {'success': True, 'wall_seconds': 2.5, 'model_calls': 1})
     bad = item_record(COMMANDS[1], {'success': False, 'reason': 'the final state is wrong: x'})
-    summary = summarise(BenchOptions(policy='oracle'), [good, bad], 10.0)
+    summary = summarise(TabletopOptions(policy='oracle'), [good, bad], 10.0)
     assert (summary['passed'], summary['total'], summary['rate']) == (1, 2, 0.5)
     assert summary['failures'] == {COMMANDS[1].key: 'the final state is wrong: x'}
     assert good['instructions'] == list(command.instructions) and good['latency_s'] == 2.5
@@ -190,7 +190,7 @@ def test_summary_counts_passes_and_lists_failures():
 @pytest.mark.graph
 def test_two_commands_pass_through_the_graph_with_the_oracle(ros_isolation, tmp_path):
     commands = select(['bowl_by_name', 'undo_last'])  # one single instruction, one three-instruction session
-    summary = run_devset(BenchOptions(out=str(tmp_path), first_domain_id=int(ros_isolation)), commands)
+    summary = run_devset(TabletopOptions(out=str(tmp_path), first_domain_id=int(ros_isolation)), commands)
     items = [json.loads(line) for line in (tmp_path / 'items.jsonl').read_text().splitlines()]
     assert [item['key'] for item in items] == ['bowl_by_name', 'undo_last']
     assert all(item['success'] for item in items), summary['failures']

@@ -1,7 +1,7 @@
 """Which ROS_DOMAIN_ID each parallel graph of a benchmark run uses."""
 import pytest
 
-from cap_bench.runner import domain_ids
+from cap_bench.ros_domains import domain_ids
 
 
 def test_jobs_use_consecutive_ids_from_the_environments_domain():

@@ -4,10 +4,11 @@ import itertools
 import numpy as np
 import pytest
 
-from cap_bench import table
-from cap_bench.episodes import MAGNITUDE_DISTANCES, sample_episode
-from cap_bench.success import check
-from cap_bench.templates import GROUPS, TEMPLATES, render
+from cap_bench.tabletop import table
+from cap_bench.tabletop.episodes import MAGNITUDE_DISTANCES
+from cap_bench.tabletop.sampling import sample_episode
+from cap_bench.tabletop.success import check
+from cap_bench.tabletop.templates import GROUPS, TEMPLATES, render
 
 ROWS = [(group, template) for group, (_, templates) in GROUPS.items() for template in templates]
 BLOCK_Z, BOWL_Z = 0.02, 0.03

@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 import shapely
 
-from cap_bench.episodes import sample_episode
-from cap_bench.oracle import oracle_program
-from cap_bench.success import check
-from cap_bench.templates import GROUPS
+from cap_bench.tabletop.oracle import oracle_program
+from cap_bench.tabletop.sampling import sample_episode
+from cap_bench.tabletop.success import check
+from cap_bench.tabletop.templates import GROUPS
 from cap_lmp.sandbox import Sandbox
 from cap_lmp_ros.domains.tabletop.lmps import denormalize_xy
 from cap_lmp_ros.testing.table import Table

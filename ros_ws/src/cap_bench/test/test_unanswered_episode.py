@@ -1,13 +1,16 @@
-"""A benchmark graph that stops answering costs its episode, not the rest of the run (runner.run_episodes).
+"""A benchmark graph that stops answering costs its episode, not the rest of the run
+(cap_bench.tabletop.runner.run_episodes).
 
 The graphs here are stand-ins that answer or time out as told: what is tested is the runner's bookkeeping, which
 the graph tests cannot make happen on demand.
 """
-from cap_bench.runner import BenchOptions, episode_key, run_episodes
+from cap_bench.tabletop.episodes import episode_key
+from cap_bench.tabletop.options import TabletopOptions
+from cap_bench.tabletop.runner import run_episodes
 
 
 class _Graph:
-    """Answers every episode, except those in `silent`, where it stops answering (as _EpisodeRunner raises)."""
+    """Answers every episode, except those in `silent`, where it stops answering (as TabletopRunner raises)."""
 
     def __init__(self, silent: set[str], log: list[str]) -> None:
         self.silent, self.log = silent, log
@@ -35,7 +38,7 @@ def test_a_graph_that_stops_answering_fails_its_episode_and_the_rest_run_on_a_ne
         return graphs[-1]
 
     records: list[dict] = []
-    built = run_episodes(keys, BenchOptions(policy='llm'), make, records.append)
+    built = run_episodes(keys, TabletopOptions(policy='llm'), make, records.append)
 
     assert [r['key'] for r in records] == keys
     assert [r['success'] for r in records] == [True, False, True]

@@ -11,10 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import pathlib
-import signal
-import sys
 import threading
 import time
 from typing import Any, Sequence
@@ -26,10 +23,13 @@ from cap_ros_common.actions import ActionClient
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from cap_bench.bench_options import BenchOptions, policy_description
 from cap_bench.charts import Bar, bar_chart
 from cap_bench.controllers import templates
 from cap_bench.controllers.templates import ControllerEpisode, Verdict
-from cap_bench.runner import Interrupted, domain_ids
+from cap_bench.episode_runs import CASSETTE, show_progress, write_record
+from cap_bench.graph_cli import GraphBench, comma_separated
+from cap_bench.ros_domains import domain_ids, use_own_domain
 from cap_bringup.graph import Graph, GraphOptions
 from cap_control import kinematics
 from cap_controllers import plants
@@ -41,6 +41,7 @@ from cap_lmp_ros.domains.controllers.domain import DOMAIN
 from cap_ros_common.time import to_seconds
 
 DEFAULT_OUT = 'output/bench-controllers'
+ITEMS = 'items.jsonl'
 UI_LMP = 'controllers_ui'
 
 
@@ -221,61 +222,27 @@ def report(items: Sequence[dict[str, Any]], policy: str, wall_seconds: float, ou
     return summary
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='cap bench controllers', description=__doc__.split('\n\n')[0])
-    parser.add_argument('--policy', choices=('oracle', 'llm'), default='oracle',
-                        help='oracle: the reference programs; llm: a model at an OpenAI-compatible endpoint')
-    parser.add_argument('--base-url', default='', help='for --policy llm; default CAP_LLM_BASE_URL')
-    parser.add_argument('--model', default='', help='for --policy llm; default CAP_LLM_MODEL')
-    parser.add_argument('--api', choices=('chat', 'completions'), default='chat', help='for --policy llm [chat]')
-    parser.add_argument('--templates', default=','.join(templates.TEMPLATES),
-                        help=f'comma-separated [{",".join(templates.TEMPLATES)}]')
-    parser.add_argument('--trials', type=int, default=5, help='episodes (seeds) per template [5]')
-    parser.add_argument('--base-seed', type=int, default=0, help='seed of the first trial [0]')
-    parser.add_argument('--balance-seconds', type=float, default=30.0, help='length of a balance episode [30]')
-    parser.add_argument('--real-time', action='store_true', help='simulate in real time (default: as fast as '
-                                                                  'possible)')
-    parser.add_argument('--episode-timeout', type=float, default=600.0, help='wall seconds per episode [600]')
-    parser.add_argument('--out', default=DEFAULT_OUT, help=f'output folder [{DEFAULT_OUT}]')
-    return parser
-
-
-def _raise_interrupted(signum: int, _frame: Any) -> None:
-    raise Interrupted(signum)
-
-
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        chosen = [name.strip() for name in args.templates.split(',') if name.strip()]
-        episodes = [templates.episode(name, args.base_seed + trial, args.balance_seconds)
-                    for trial in range(args.trials) for name in chosen]
-    except ValueError as error:
-        print(f'cap bench controllers: error: {error}', file=sys.stderr)
-        return 2
-    out = pathlib.Path(args.out)
+def run_benchmark(options: BenchOptions, episodes: Sequence[ControllerEpisode], real_time: bool = False) -> dict:
+    """Run `episodes` one after another in one graph on the policy of `options`; write items.jsonl and the report
+    into options.out and return the summary."""
+    out = pathlib.Path(options.out)
     out.mkdir(parents=True, exist_ok=True)
-    options = GraphOptions(domain=DOMAIN.name, real_time=args.real_time)
-    if args.policy == 'oracle':
-        write_oracle_cassette(episodes, out / 'oracle_cassette.yaml')
-        options.cassette = str(out / 'oracle_cassette.yaml')
-        policy = 'oracle programs (reference programs replayed from a cassette, no model)'
+    graph = GraphOptions(domain=DOMAIN.name, real_time=real_time)
+    if options.policy == 'oracle':
+        write_oracle_cassette(episodes, out / CASSETTE)
+        graph.cassette = str(out / CASSETTE)
     else:
-        model = args.model or os.environ.get('CAP_LLM_MODEL', '')
-        options.llm_backend = 'http'
-        options.extra = {'lmp_node': {key: value for key, value in
-                                      (('base_url', args.base_url), ('model', args.model), ('api', args.api)) if value}}
-        policy = f"model {model or '(unnamed)'} at {args.base_url or os.environ.get('CAP_LLM_BASE_URL', '')}"
+        graph.llm_backend = 'http'
+        graph.extra = {'lmp_node': {key: value for key, value in (('base_url', options.base_url),
+                                                                  ('model', options.model), ('api', options.api))
+                                    if value}}
     # The graph comes up in this process: keep it on a DDS domain of its own, on this host.
-    os.environ['ROS_DOMAIN_ID'] = str(domain_ids(1)[0])
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, _raise_interrupted)
+    use_own_domain(domain_ids(1, options.first_domain_id)[0])
     started = time.monotonic()
     items: list[dict[str, Any]] = []
-    runner = Runner(options, args.episode_timeout)
+    runner = Runner(graph, options.episode_timeout_s)
     try:
-        with open(out / 'items.jsonl', 'w', encoding='utf-8') as stream:
+        with open(out / ITEMS, 'w', encoding='utf-8') as stream:
             for index, item in enumerate(episodes, 1):
                 try:
                     record = runner.run(item)
@@ -283,21 +250,43 @@ def main(argv: list[str] | None = None) -> int:
                     record = {'key': item.key, 'template': item.template, 'seed': item.seed, 'success': False,
                               'reason': f'the run failed: {error}'}
                 items.append(record)
-                stream.write(json.dumps(record) + '\n')
-                stream.flush()
-                verdict = 'ok' if record['success'] else f"FAILED: {record['reason'][:300]}"
-                print(f"[{index}/{len(episodes)}] {item.key}: {verdict} ({record.get('wall_seconds', 0):.1f} s)",
-                      file=sys.stderr, flush=True)
-    except Interrupted as interrupted:
-        print(f'interrupted ({interrupted}): the episodes finished so far are in {out}/items.jsonl',
-              file=sys.stderr)
-        return interrupted.exit_code
+                write_record(stream, record)
+                show_progress(index, len(episodes), item.key, record, record.get('wall_seconds', 0))
     finally:
         runner.close()
-    summary = report(items, policy, time.monotonic() - started, out)
-    print(json.dumps(summary))
-    return 0
+    return report(items, policy_description(options), time.monotonic() - started, out)
 
 
-if __name__ == '__main__':
-    sys.exit(main())
+class ControllersBench(GraphBench):
+    """The controller benchmark's own options: the templates, the balance episodes' length, real time."""
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        parser.add_argument('--templates', default=','.join(templates.TEMPLATES),
+                            help=f'comma-separated [{",".join(templates.TEMPLATES)}]')
+        parser.add_argument('--balance-seconds', type=float, default=30.0, help='length of a balance episode [30]')
+        parser.add_argument('--real-time', action='store_true', help='simulate in real time (default: as fast as '
+                                                                      'possible)')
+
+    def episodes(self, args: argparse.Namespace) -> list[ControllerEpisode]:
+        """The run's episodes (ValueError for an unknown template)."""
+        return [templates.episode(name, args.seed + trial, args.balance_seconds)
+                for trial in range(args.trials) for name in comma_separated(args.templates)]
+
+    def options(self, args: argparse.Namespace) -> BenchOptions:
+        self.episodes(args)
+        return super().options(args)
+
+    def run(self, options: BenchOptions, args: argparse.Namespace) -> dict:
+        return run_benchmark(options, self.episodes(args), args.real_time)
+
+    def kept(self, args: argparse.Namespace) -> str:
+        return f'the episodes finished so far are in {args.out}/{ITEMS}'
+
+
+BENCH = ControllersBench(name='controllers', description=__doc__.split('\n\n')[0], out=DEFAULT_OUT, trials=5,
+                         seed_aliases=('--base-seed',), resume=False, episode_timeout=600.0,
+                         timeout_per='episode (wall time)', default_api='chat', backends=False)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return BENCH.main(argv)

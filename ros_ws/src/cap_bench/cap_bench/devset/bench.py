@@ -10,29 +10,26 @@ appended to items.jsonl as it ends; the summary is printed as JSON and written t
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import pathlib
-import signal
-import sys
 import time
 from typing import Any, Callable, Sequence
 
-import yaml
-
 from cap_bench.devset.commands import BY_KEY, COMMANDS, DevCommand, Positions, select
-from cap_bench.episodes import Episode
-from cap_bench.runner import (BenchOptions, Interrupted, _EpisodeRunner, add_model_arguments, domain_ids,
-                              model_endpoint, model_settings)
-from cap_bench.success import Verdict
-from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT, HAND_WRITTEN, normalise_query
-from cap_lmp.errors import LLMError
-from cap_lmp.safe_text import one_line, terminal_text
+from cap_bench.episode_runs import CASSETTE, show_progress, write_cassette, write_record
+from cap_bench.graph_cli import GraphBench, comma_separated
+from cap_bench.ros_domains import domain_ids, use_own_domain
+from cap_bench.tabletop.episodes import Episode
+from cap_bench.tabletop.options import TabletopOptions
+from cap_bench.tabletop.runner import TabletopRunner
+from cap_bench.tabletop.success import Verdict
+from cap_lmp.cassette import HAND_WRITTEN, normalise_query
 
 DEFAULT_OUT = 'output/devset'
 ITEMS = 'items.jsonl'
 SUMMARY = 'summary.json'
-CASSETTE = 'oracle_cassette.yaml'
 UI_LMP = 'tabletop_ui'  # the LMP that receives a user's instruction (the only one the references answer)
 
 
@@ -47,8 +44,7 @@ def write_oracle_cassette(commands: Sequence[DevCommand], path: pathlib.Path) ->
                 raise ValueError(f'two dev commands send {instruction!r} with different reference programs')
             entries[key] = {'lmp': UI_LMP, 'query': instruction, 'context': '*',
                             'source': f'{HAND_WRITTEN} (cap_bench devset, {command.key})', 'completion': program}
-    path.write_text(yaml.safe_dump({'format': CASSETTE_FORMAT, 'entries': list(entries.values())},
-                                   sort_keys=False, width=120), encoding='utf-8')
+    write_cassette(entries.values(), path)
 
 
 def item_record(command: DevCommand, run: dict[str, Any]) -> dict[str, Any]:
@@ -61,7 +57,7 @@ def item_record(command: DevCommand, run: dict[str, Any]) -> dict[str, Any]:
             'final_state': run.get('final_state', {})}
 
 
-def summarise(options: BenchOptions, items: Sequence[dict[str, Any]], wall_seconds: float) -> dict[str, Any]:
+def summarise(options: TabletopOptions, items: Sequence[dict[str, Any]], wall_seconds: float) -> dict[str, Any]:
     """What was run and how it went: passed / total, the pass rate, wall time and each failure's reason."""
     passed = sum(item['success'] for item in items)
     summary: dict[str, Any] = {'policy': options.policy}
@@ -78,7 +74,7 @@ def _episode_judge(command: DevCommand) -> Callable[[Episode, Positions, Positio
     return lambda _episode, initial, final: command.judge(initial, final)
 
 
-def run_devset(options: BenchOptions, commands: Sequence[DevCommand] = COMMANDS) -> dict[str, Any]:
+def run_devset(options: TabletopOptions, commands: Sequence[DevCommand] = COMMANDS) -> dict[str, Any]:
     """Run `commands` in one graph on the policy of `options` (policy, base_url, model, api, episode_timeout_s,
     out, first_domain_id); write items.jsonl and summary.json into options.out and return the summary."""
     out = pathlib.Path(options.out)
@@ -88,11 +84,10 @@ def run_devset(options: BenchOptions, commands: Sequence[DevCommand] = COMMANDS)
         cassette = out / CASSETTE
         write_oracle_cassette(commands, cassette)
     # The graph comes up in this process: keep it on a DDS domain of its own, on this host.
-    os.environ['ROS_DOMAIN_ID'] = str(domain_ids(1, options.first_domain_id)[0])
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    use_own_domain(domain_ids(1, options.first_domain_id)[0])
     started = time.monotonic()
     items = []
-    runner = _EpisodeRunner(options, cassette)
+    runner = TabletopRunner(options, cassette)
     try:
         with open(out / ITEMS, 'w', encoding='utf-8') as stream:
             for index, command in enumerate(commands, 1):
@@ -103,11 +98,8 @@ def run_devset(options: BenchOptions, commands: Sequence[DevCommand] = COMMANDS)
                     run = {'success': False, 'reason': f'the run failed: {error}'}
                 item = item_record(command, run)
                 items.append(item)
-                stream.write(json.dumps(item) + '\n')
-                stream.flush()
-                verdict = 'ok' if item['success'] else f"FAILED: {terminal_text(item['reason'], limit=300)}"
-                print(f"[{index}/{len(commands)}] {command.key}: {verdict} ({item['latency_s']:.1f} s)",
-                      file=sys.stderr, flush=True)
+                write_record(stream, item)
+                show_progress(index, len(commands), command.key, item, item['latency_s'])
     finally:
         runner.close()
     summary = summarise(options, items, time.monotonic() - started)
@@ -115,47 +107,29 @@ def run_devset(options: BenchOptions, commands: Sequence[DevCommand] = COMMANDS)
     return summary
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='cap bench devset', description=__doc__.split('\n\n')[0])
-    parser.add_argument('--policy', choices=('oracle', 'llm'), default='oracle',
-                        help='oracle: the reference programs; llm: a model at an OpenAI-compatible endpoint')
-    add_model_arguments(parser, default_api='completions')
-    parser.add_argument('--commands', default='', help=f'comma-separated keys [all]: {", ".join(BY_KEY)}')
-    parser.add_argument('--out', default=DEFAULT_OUT, help=f'output folder [{DEFAULT_OUT}]')
-    parser.add_argument('--episode-timeout', type=float, default=BenchOptions.episode_timeout_s,
-                        help=f'seconds per instruction [{BenchOptions.episode_timeout_s:g}]')
-    return parser
+class DevsetBench(GraphBench):
+    """The development set's own option: which commands (--commands)."""
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        parser.add_argument('--commands', default='', help=f'comma-separated keys [all]: {", ".join(BY_KEY)}')
+
+    def options(self, args: argparse.Namespace) -> TabletopOptions:
+        try:
+            select(comma_separated(args.commands))
+        except KeyError as error:
+            raise ValueError(error.args[0]) from None
+        return TabletopOptions(**dataclasses.asdict(super().options(args)))
+
+    def run(self, options: TabletopOptions, args: argparse.Namespace) -> dict:
+        return run_devset(options, select(comma_separated(args.commands)))
+
+    def kept(self, args: argparse.Namespace) -> str:
+        return f'the commands finished so far are in {args.out}/{ITEMS}'
 
 
-def _raise_interrupted(signum: int, _frame: Any) -> None:
-    raise Interrupted(signum)
+BENCH = DevsetBench(name='devset', description=__doc__.split('\n\n')[0], out=DEFAULT_OUT, domain='tabletop',
+                    trials=None, resume=False, episode_timeout=TabletopOptions.episode_timeout_s)
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        commands = select(part.strip() for part in args.commands.split(','))
-        first_domain_id = domain_ids(1)[0]
-    except (KeyError, ValueError) as error:
-        print(f'cap bench devset: error: {error.args[0]}', file=sys.stderr)
-        return 2
-    options = BenchOptions(policy=args.policy, out=args.out, episode_timeout_s=args.episode_timeout,
-                           first_domain_id=first_domain_id, **model_settings(args))
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, _raise_interrupted)
-    try:
-        with model_endpoint(options) as options:
-            summary = run_devset(options, commands)
-    except LLMError as error:  # the local model could not start: one line saying why and what to do
-        print(f'cap bench devset: error: {one_line(str(error))}', file=sys.stderr)
-        return 2
-    except Interrupted as interrupted:
-        print(f'interrupted ({interrupted}): the commands finished so far are in {args.out}/{ITEMS}',
-              file=sys.stderr)
-        return interrupted.exit_code
-    print(json.dumps(summary))
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())
+    return BENCH.main(argv)

@@ -19,11 +19,11 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from cap_bench.oracle import position_code
-from cap_bench import table
-from cap_bench.episodes import MAGNITUDE_DISTANCES, Episode, SceneObject
-from cap_bench.success import (LINE_MIN_GAP, LINE_SPREAD, MAGNITUDE_PERPENDICULAR, MAGNITUDE_RANGE, NEAR_PLACE,
-                               OK, STACK_STEP, UNTOUCHED, Verdict, is_on)
+from cap_bench.tabletop import table
+from cap_bench.tabletop.episodes import MAGNITUDE_DISTANCES, Episode, SceneObject
+from cap_bench.tabletop.oracle import position_code
+from cap_bench.tabletop.success import (LINE_MIN_GAP, LINE_SPREAD, MAGNITUDE_PERPENDICULAR, MAGNITUDE_RANGE,
+                                        NEAR_PLACE, OK, STACK_STEP, UNTOUCHED, Verdict, is_on)
 
 GROUP = 'dev'  # the group name of a development command's episode (a benchmark record's group is SA-SI etc.)
 SHIFT_TOLERANCE = 0.03  # "10 cm to the left": within 3 cm of the asked displacement, along and across

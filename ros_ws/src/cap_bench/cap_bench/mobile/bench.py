@@ -15,38 +15,33 @@ summarise them per template, with each failure's reason. One graph runs the epis
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import pathlib
 import re
-import signal
-import sys
 import threading
 import time
 from typing import Sequence
 
 import numpy as np
-import yaml
 from cap_mobile import layout, objects
 
-from cap_bench.episode_runs import EPISODES, lmp_parameters, load_records, run_episodes
+from cap_bench import episode_runs, template_report
+from cap_bench.bench_options import BenchOptions, policy_description
+from cap_bench.episode_runs import episode_record, load_records, run_episodes
+from cap_bench.graph_cli import TemplateBench
+from cap_bench.graph_client import GraphClient, outcome_name
 from cap_bench.mobile.episodes import (TEMPLATES, Episode, oracle_program, rectangle_corners, sample_episode,
                                        square_poses)
-from cap_bench.runner import (BenchOptions, Interrupted, _raise_interrupted, _wait, add_model_arguments, domain_ids,
-                              model_endpoint, model_settings, outcome_name, policy_description)
 from cap_bringup import base_path
-from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT, HAND_WRITTEN, normalise_query
-from cap_lmp.errors import LLMError
 from cap_lmp.safe_text import one_line
 
 DEFAULT_OUT = 'output/mobile'
 UI_LMP = 'mobile_ui'
-SERVICE_TIMEOUT_S = 60.0
 TARGET_ORACLE_RATE = 0.98  # the bar the reference programs must clear
 REACHED = 0.05  # [m] a goal or corner reached
 HEADING = 0.05  # [rad]
 PLACED = 0.05  # [m] of a fetched object from its spot
+CRITERIA = {'reached_m': REACHED, 'heading_rad': HEADING, 'placed_m': PLACED, 'oracle_rate_target': TARGET_ORACLE_RATE}
 
 
 def plan(templates: Sequence[str], trials: int, base_seed: int = 0) -> list[Episode]:
@@ -55,15 +50,7 @@ def plan(templates: Sequence[str], trials: int, base_seed: int = 0) -> list[Epis
 
 def write_oracle_cassette(episodes: Sequence[Episode], path: pathlib.Path) -> None:
     """One reference program per distinct instruction."""
-    entries = {}
-    for episode in episodes:
-        for instruction in episode.instructions:
-            entries[normalise_query(instruction)] = {
-                'lmp': UI_LMP, 'query': instruction, 'context': '*',
-                'source': f'{HAND_WRITTEN} (cap_bench mobile, {episode.template})',
-                'completion': oracle_program(instruction)}
-    path.write_text(yaml.safe_dump({'format': CASSETTE_FORMAT, 'entries': list(entries.values())},
-                                   sort_keys=False, width=120), encoding='utf-8')
+    episode_runs.write_oracle_cassette(episodes, path, UI_LMP, 'mobile', oracle_program)
 
 
 def judge(episode: Episode, path: np.ndarray, final_pose: np.ndarray, states: dict, said: Sequence[str]) -> str:
@@ -135,72 +122,28 @@ def _judge_search(a: dict, path: np.ndarray, final_pose: np.ndarray, states: dic
     return ''
 
 
-class MobileRunner:
+class MobileRunner(GraphClient):
     """One mobile graph in this process, running episodes one after another."""
 
     def __init__(self, options: BenchOptions, cassette: pathlib.Path | None) -> None:
-        import rclpy
-        from cap_ros_common.actions import ActionClient
-        from rclpy.context import Context
         from std_msgs.msg import String
-        from std_srvs.srv import Trigger
 
-        from cap_bringup.graph import Graph, GraphOptions
-        from cap_interfaces.action import ExecuteCommand
         from cap_interfaces.msg import GraphNames
-        from cap_interfaces.srv import ResetScene
 
-        self.options = options
-        self.context = Context()
-        rclpy.init(context=self.context)
-        backend, lmp = lmp_parameters(options)
-        self.graph = Graph(self.context, GraphOptions(
-            domain='mobile', llm_backend=backend, cassette=str(cassette) if cassette else '', camera_rate=0.0,
-            extra={'lmp_node': lmp}))
-        self.node = rclpy.create_node('cap_bench_mobile', context=self.context)
-        self.graph.executor.add_node(self.node)
+        super().__init__(options, cassette, 'cap_bench_mobile', domain='mobile', camera_rate=0.0)
         self.said: list[str] = []
         self.node.create_subscription(String, GraphNames.SAY_TOPIC, lambda msg: self.said.append(msg.data), 50)
-        self.execute = ActionClient(self.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
-        self.reset = self.node.create_client(ResetScene, GraphNames.SIM_RESET_SERVICE)
-        self.reset_session = self.node.create_client(Trigger, GraphNames.RESET_SESSION_SERVICE)
-        self.ExecuteCommand, self.ResetScene, self.Trigger = ExecuteCommand, ResetScene, Trigger
-        if not _wait(lambda: self.execute.server_is_ready() and self.reset.service_is_ready()
-                     and self.reset_session.service_is_ready(), 60):
-            raise RuntimeError('the mobile graph did not come up within 60 s')
+        self.wait_until_ready('the mobile graph')
 
-    def _call(self, future, timeout: float, what: str):
-        if not _wait(future.done, timeout):
-            raise TimeoutError(f'no answer from {what} within {timeout:.0f} s')
-        return future.result()
-
-    def _perceived(self) -> set[str]:
-        try:
-            return {obj.name for obj in self.graph.nodes['perception_node'].source.objects()}
-        except Exception:  # noqa: BLE001 - perception not ready yet
-            return set()
-
-    def run(self, episode: Episode) -> dict:
-        from geometry_msgs.msg import Point
-
-        from cap_interfaces.msg import ObjectSpec
-
-        world = self.graph.world
-        record = base_record(episode, self.options)
-        wall_started = time.monotonic()
-        request = self.ResetScene.Request(seed=episode.seed, objects=[
-            ObjectSpec(name=o.name, use_position=True, position=Point(x=o.xy[0], y=o.xy[1])) for o in episode.objects])
-        answer = self._call(self.reset.call_async(request), SERVICE_TIMEOUT_S, 'the scene reset')
-        if not answer.success:
-            record['reason'] = f'scene reset failed: {answer.message}'
-            return record
-        self._call(self.reset_session.call_async(self.Trigger.Request()), SERVICE_TIMEOUT_S,
-                   'lmp_node (reset session)')
+    def scene_reset(self) -> None:
         # The mobile pick-and-place node's memory of what it holds goes with the scene.
         self.graph.nodes['mobile_pick_place'].executor_.held = None
-        names = {o.name for o in episode.objects}
-        if not _wait(lambda: self._perceived() == names, 30):
-            record['reason'] = f'perception did not report the reset scene within 30 s: {sorted(self._perceived())}'
+
+    def run(self, episode: Episode) -> dict:
+        world = self.graph.world
+        record = episode_record(episode, self.options)
+        wall_started = time.monotonic()
+        if not self.start_episode(episode, record):
             return record
         sim_started = world.time
         self.said.clear()
@@ -213,137 +156,53 @@ class MobileRunner:
 
         recorder = threading.Thread(target=record_path, daemon=True)
         recorder.start()
-        codes, result = [], None
         try:
-            for instruction in episode.instructions:
-                goal = self._call(self.execute.send_goal_async(self.ExecuteCommand.Goal(command=instruction)), 30,
-                                  'lmp_node (goal)')
-                future = goal.get_result_async()
-                if not _wait(future.done, self.options.episode_timeout_s + 60):
-                    goal.cancel_goal_async()
-                    _wait(future.done, 30)
-                    record['reason'] = f'no result within {self.options.episode_timeout_s:.0f} s'
-                    return record
-                result = future.result().result
-                codes.append(result.code)
-                record['model_calls'] += result.model_calls
-                if result.outcome != self.ExecuteCommand.Result.OUTCOME_DONE:
-                    break
+            results = self.run_instructions(episode.instructions, record)
+            if results is None:
+                return record
             time.sleep(0.2)  # the last words on the say topic
         finally:
             recording.set()
             recorder.join()
-        done = result is not None and result.outcome == self.ExecuteCommand.Result.OUTCOME_DONE
+        done = self.finished(results)
+        result = results[-1] if results else None
         world.run_for(0.5)  # what was just let go comes to rest
         path = np.array(points + [world.base_pose()[:2].copy()])
         states = {state.name: state for state in world.object_states()}
         reason = judge(episode, path, world.base_pose(), states, self.said) if done else \
             f'the command ended {outcome_name(result.outcome) if result else "without a result"}: ' \
             f'{one_line(result.message) if result else ""}'
-        record.update(code='\n# ---\n'.join(codes), success=not reason, reason=reason,
+        record.update(code='\n# ---\n'.join(r.code for r in results), success=not reason, reason=reason,
                       outcome=outcome_name(result.outcome) if result is not None else '',
                       said=list(self.said), sim_seconds=round(world.time - sim_started, 3),
                       wall_seconds=round(time.monotonic() - wall_started, 3),
                       travelled_m=round(float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))), 3))
         return record
 
-    def close(self) -> None:
-        self.graph.close()
-        self.node.destroy_node()
-        self.context.try_shutdown()
-
-
-def base_record(episode: Episode, options: BenchOptions) -> dict:
-    """An episode's record before it ran: not a success."""
-    return {'key': episode.key, 'template': episode.template, 'seed': episode.seed,
-            'instructions': list(episode.instructions), 'policy': options.policy, 'success': False, 'reason': '',
-            'code': '', 'outcome': '', 'sim_seconds': 0.0, 'wall_seconds': 0.0, 'model_calls': 0,
-            'objects': {o.name: list(o.xy) for o in episode.objects}}
-
 
 def summarise(records: Sequence[dict], policy: str, wall_seconds: float) -> dict:
-    rows = []
-    for template in TEMPLATES:
-        mine = [r for r in records if r['template'] == template]
-        if mine:
-            rows.append({'template': template, 'trials': len(mine), 'successes': sum(r['success'] for r in mine),
-                         'percent': 100.0 * sum(r['success'] for r in mine) / len(mine),
-                         'sim_seconds_median': float(np.median([r['sim_seconds'] for r in mine]))})
-    total, passed = len(records), sum(r['success'] for r in records)
-    return {'title': 'Mobile kitchen: driving, fetching, putting away, counting, searching', 'policy': policy,
-            'criteria': {'reached_m': REACHED, 'heading_rad': HEADING, 'placed_m': PLACED,
-                         'oracle_rate_target': TARGET_ORACLE_RATE},
-            'rows': rows, 'overall': {'trials': total, 'successes': passed,
-                                      'percent': 100.0 * passed / total if total else None},
-            'wall_seconds': round(wall_seconds, 1),
-            'episode_wall_seconds_median': float(np.median([r['wall_seconds'] for r in records])) if records else 0,
-            'failures': {r['key']: r['reason'] for r in records if not r['success']}}
+    """Per template and overall: passed / trials, the median simulated time; each failure's reason."""
+    return template_report.summarise(
+        records, TEMPLATES, 'Mobile kitchen: driving, fetching, putting away, counting, searching', policy,
+        CRITERIA, wall_seconds, lambda mine: {'sim_seconds_median': float(np.median([r['sim_seconds'] for r in mine]))})
 
 
 def write_report(summary: dict, out: pathlib.Path) -> None:
-    (out / 'report.json').write_text(json.dumps(summary, indent=2), encoding='utf-8')
-    lines = [f"# {summary['title']}", '', f"Policy: {summary['policy']}", '',
-             '| template | trials | passed % | simulated s (median) |', '|---|---|---|---|']
-    for row in summary['rows']:
-        lines.append(f"| {row['template']} | {row['trials']} | {row['percent']:.1f} | "
-                     f"{row['sim_seconds_median']:.1f} |")
-    overall = summary['overall']
-    percent = '—' if overall['percent'] is None else f"{overall['percent']:.1f}"
-    lines.append(f"| **all** | {overall['trials']} | **{percent}** | |")
-    if summary['failures']:
-        lines += ['', '## Failures', ''] + [f'- `{key}`: {reason}' for key, reason in summary['failures'].items()]
-    (out / 'report.md').write_text('\n'.join(lines) + '\n', encoding='utf-8')
+    template_report.write_report(summary, out, (('simulated s (median)', 'sim_seconds_median', '.1f'),))
 
 
 def run_benchmark(options: BenchOptions, templates: Sequence[str], resume: bool = False) -> dict:
     episodes = plan(templates, options.trials, options.base_seed)
-    seconds = run_episodes(options, episodes, resume, write_oracle_cassette, MobileRunner, base_record)
+    seconds = run_episodes(options, episodes, resume, write_oracle_cassette, MobileRunner)
     out = pathlib.Path(options.out)
     summary = summarise(load_records(out), policy_description(options), seconds)
     write_report(summary, out)
     return summary
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='cap bench mobile', description=__doc__.split('\n\n')[0])
-    parser.add_argument('--policy', choices=('oracle', 'llm'), default='oracle',
-                        help='oracle: the reference programs; llm: a model at an OpenAI-compatible endpoint')
-    add_model_arguments(parser, default_api='completions')
-    parser.add_argument('--trials', type=int, default=10, help='episodes per template [10]')
-    parser.add_argument('--templates', default=','.join(TEMPLATES), help=f'comma-separated [{",".join(TEMPLATES)}]')
-    parser.add_argument('--seed', type=int, default=0, help='seed of the first trial [0]')
-    parser.add_argument('--out', default=DEFAULT_OUT, help=f'output folder [{DEFAULT_OUT}]')
-    parser.add_argument('--resume', action='store_true', help='keep the episodes already in the output folder')
-    parser.add_argument('--episode-timeout', type=float, default=300.0, help='seconds per instruction [300]')
-    return parser
+BENCH = TemplateBench(name='mobile', description=__doc__.split('\n\n')[0], out=DEFAULT_OUT,
+                      templates=tuple(TEMPLATES), run_templates=run_benchmark)
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    templates = [t.strip() for t in args.templates.split(',') if t.strip()]
-    unknown = [t for t in templates if t not in TEMPLATES]
-    if unknown or args.trials < 1:
-        print(f'cap bench mobile: error: unknown templates {unknown}' if unknown else
-              'cap bench mobile: error: --trials must be at least 1', file=sys.stderr)
-        return 2
-    options = BenchOptions(policy=args.policy, out=args.out, trials=args.trials, base_seed=args.seed,
-                           episode_timeout_s=args.episode_timeout, first_domain_id=domain_ids(1)[0],
-                           **model_settings(args))
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, _raise_interrupted)
-    try:
-        with model_endpoint(options, 'mobile') as options:
-            summary = run_benchmark(options, templates, args.resume)
-    except LLMError as error:
-        print(f'cap bench mobile: error: {one_line(str(error))}', file=sys.stderr)
-        return 2
-    except Interrupted as interrupted:
-        print(f'interrupted ({interrupted}): the episodes finished so far are in {args.out}/{EPISODES}',
-              file=sys.stderr)
-        return interrupted.exit_code
-    print(json.dumps({key: summary[key] for key in ('overall', 'rows', 'wall_seconds')}))
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())
+    return BENCH.main(argv)

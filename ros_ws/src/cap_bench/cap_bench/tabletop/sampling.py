@@ -17,53 +17,22 @@ code was never published, kept fixed:
 from __future__ import annotations
 
 import random
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from cap_bench import table
-from cap_bench.templates import GROUPS, TEMPLATES, attribute_pool, render
+from cap_bench.tabletop import table
+from cap_bench.tabletop.episodes import MAGNITUDE_DISTANCES, ORDINALS, Episode, SceneObject
+from cap_bench.tabletop.success import check
+from cap_bench.tabletop.templates import GROUPS, TEMPLATES, attribute_pool, render
 
 REFERENT_MARGIN = 0.03
 TARGET_CLEARANCE = 0.10
-MAGNITUDE_DISTANCES = {'a little': 0.10, 'a lot': 0.25}
 _MAX_LAYOUT_TRIES = 2000
 _MAX_EPISODE_TRIES = 500
 
 
 class SamplingError(RuntimeError):
     """No valid episode was found for a seed (should not happen for the benchmark's templates)."""
-
-
-@dataclass(frozen=True)
-class SceneObject:
-    name: str  # "<colour> <category>"
-    category: str  # "block" or "bowl"
-    color: str
-    xy: tuple[float, float]
-
-
-@dataclass
-class Episode:
-    seed: int
-    group: str
-    template: str
-    instruction: str
-    attributes: dict[str, str]  # the template's slot values as rendered
-    objects: list[SceneObject]
-    # Resolved meaning, for the success checker: e.g. {'block': 'red block', 'target': 'blue bowl'}.
-    referents: dict[str, str] = field(default_factory=dict)
-
-    @property
-    def blocks(self) -> list[str]:
-        return [obj.name for obj in self.objects if obj.category == 'block']
-
-    @property
-    def bowls(self) -> list[str]:
-        return [obj.name for obj in self.objects if obj.category == 'bowl']
-
-    def initial_xy(self) -> dict[str, np.ndarray]:
-        return {obj.name: np.array(obj.xy) for obj in self.objects}
 
 
 def sample_layout(rng: random.Random, count: int) -> list[tuple[float, float]]:
@@ -92,6 +61,12 @@ def sample_episode(group: str, template: str, seed: int) -> Episode:
         if episode is not None and not _already_done(episode):
             return episode
     raise SamplingError(f'no unambiguous {template} episode for seed {seed} in {group}')
+
+
+def episode_for_key(key: str) -> Episode:
+    """The episode named `key` ('group/template/seed', see episodes.episode_key)."""
+    group, template, seed = key.split('/')
+    return sample_episode(group, template, int(seed))
 
 
 def _try_episode(rng: random.Random, group: str, template: str, seed: int, unseen: bool) -> Episode | None:
@@ -180,8 +155,6 @@ def _try_episode(rng: random.Random, group: str, template: str, seed: int, unsee
 
 def _already_done(episode: Episode) -> bool:
     """True when the initial layout already meets the instruction (e.g. the block already lies 'a lot' left)."""
-    from cap_bench.success import check  # the checker depends on this module's Episode
-
     state = {o.name: (o.xy[0], o.xy[1], 0.02 if o.category == 'block' else 0.03) for o in episode.objects}
     return check(episode, state, state).success
 
@@ -203,9 +176,6 @@ def _block_by_direction(blocks, xy, bowl, direction) -> str | None:
     ahead = [b for b in blocks if (xy[b] - xy[bowl]) @ unit >= REFERENT_MARGIN]
     behind = [b for b in blocks if (xy[b] - xy[bowl]) @ unit <= -REFERENT_MARGIN]
     return ahead[0] if len(ahead) == 1 and len(behind) == len(blocks) - 1 else None
-
-
-ORDINALS = {'first': 0, 'second': 1, 'third': 2, 'fourth': 3}
 
 
 def _nth_block(blocks, xy, nth, direction) -> str | None:

@@ -13,8 +13,8 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from cap_bench import table
-from cap_bench.episodes import Episode
+from cap_bench.tabletop import table
+from cap_bench.tabletop.episodes import Episode
 
 NEAR_PLACE = 0.06  # "on / in" a bowl, corner or side
 NEAR_BLOCK = 0.04  # "on" a block (and higher than it)

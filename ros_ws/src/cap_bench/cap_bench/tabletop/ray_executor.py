@@ -30,17 +30,20 @@ import time
 from types import ModuleType
 from typing import Callable, Iterator, Sequence
 
-from cap_bench.runner import BenchOptions, EpisodeGraph, _EpisodeRunner, write_record
+from cap_bench.episode_runs import write_record
+from cap_bench.ros_domains import use_own_domain
+from cap_bench.tabletop.options import TabletopOptions
+from cap_bench.tabletop.runner import TabletopRunner, episode_graph
+from cap_bench.tabletop.sampling import episode_for_key
 
 CANCEL_TIMEOUT_S = 30.0  # for a cancelled task to close its graph before it is killed
 
 
-def _run_job(index: int, keys, options: BenchOptions, cassette_text: str | None, domain_id: int) -> Iterator[dict]:
+def _run_job(index: int, keys, options: TabletopOptions, cassette_text: str | None, domain_id: int) -> Iterator[dict]:
     """In a Ray worker: bring up a graph and yield the record of each episode it takes from the run's queue `keys`
     (a ray.util.queue.Queue), until it takes None."""
     # Before rclpy starts: a DDS domain of this job's own, discovery on this machine's loopback only.
-    os.environ['ROS_DOMAIN_ID'] = str(domain_id)
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    use_own_domain(domain_id)
     os.environ.pop('ROS_LOCALHOST_ONLY', None)
     # This task may run on a machine without the driver's --out: the oracle cassette travels as text.
     with tempfile.TemporaryDirectory(prefix='cap-bench-') as folder:
@@ -49,10 +52,10 @@ def _run_job(index: int, keys, options: BenchOptions, cassette_text: str | None,
             cassette = pathlib.Path(folder) / 'oracle_cassette.yaml'
             cassette.write_text(cassette_text, encoding='utf-8')
         # Pinned to CPU i of this machine (modulo its CPUs), as local job i is (see cap_bringup.cpu_affinity).
-        graph = EpisodeGraph(options, lambda: _EpisodeRunner(options, cassette, cpu=index))
+        graph = episode_graph(options, lambda: TabletopRunner(options, cassette, cpu=index))
         try:
             for key in iter(keys.get, None):
-                yield graph.run(key)
+                yield graph.run(episode_for_key(key))
         finally:  # also on cancellation (KeyboardInterrupt raised in the task)
             graph.close()
 
@@ -82,7 +85,7 @@ def start(address: str, jobs: int) -> ModuleType:
     return ray
 
 
-def run_jobs(keys: Sequence[str], jobs: int, options: BenchOptions, cassette: pathlib.Path | None,
+def run_jobs(keys: Sequence[str], jobs: int, options: TabletopOptions, cassette: pathlib.Path | None,
              out_dir: pathlib.Path, count: Callable[[bool], None]) -> None:
     """Run the episodes `keys` on `jobs` Ray tasks, each taking the next episode from one queue when it is free,
     writing each record of job i to out_dir/episodes-<i>.jsonl and counting it with `count(success)`; raise

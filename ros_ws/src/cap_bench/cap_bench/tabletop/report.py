@@ -6,7 +6,7 @@ import pathlib
 from typing import Iterable, Mapping
 
 from cap_bench.charts import Bar, bar_chart
-from cap_bench.templates import GROUPS
+from cap_bench.tabletop.templates import GROUPS
 
 # The Code as Policies paper's simulated table-top results (code-davinci-002), % success per row.
 PAPER: dict[str, dict[str, float]] = {

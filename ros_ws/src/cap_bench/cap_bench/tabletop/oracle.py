@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from cap_bench import table
-from cap_bench.episodes import MAGNITUDE_DISTANCES, ORDINALS, Episode
+from cap_bench.tabletop import table
+from cap_bench.tabletop.episodes import MAGNITUDE_DISTANCES, ORDINALS, Episode
 from cap_tabletop.objects import BLOCK_SIZE, BOWL_RIM_RADIUS
 from cap_control.pick_place.plan import PickPlaceConfig
 from cap_tabletop.workspace import NORMALISED_ORIGIN, NORMALISED_SPAN, TABLE_X_RANGE, TABLE_Y_RANGE
