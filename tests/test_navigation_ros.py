@@ -1,4 +1,5 @@
-"""Navigation through ROS: the Navigate action drives the simulated mobile base in the kitchen.
+"""Navigation through ROS: nav2's NavigateToPose action, as the navigation node serves it under nav2's name, drives
+the simulated mobile base in the kitchen.
 
 The graph is the real one: the MuJoCo sim bridge with the kitchen scene (the base on its servos, the furniture it
 collides with) and the navigation node, over DDS, at twice real time. Outcomes are judged on the simulator's state.
@@ -20,14 +21,14 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Empty
 
 from cap_control import ros_conversions as conv
-from cap_control.navigation.plan import wrap_angle
+from cap_control.navigation.plan import NavigateErrorCode, wrap_angle
 from cap_control.navigation.node import NavigationNode
-from cap_interfaces.action import Navigate
 from cap_interfaces.msg import GraphNames
+from nav2_msgs.action import NavigateToPose
 from cap_sim_bridge.bridge_node import SimBridgeNode
 
 WAIT = 60.0  # [s] wall time, far beyond a drive across the kitchen at twice real time
-Result = Navigate.Result
+Result = NavigateErrorCode
 
 
 @pytest.fixture
@@ -38,7 +39,7 @@ def graph(ros_context, spin_until):
         Parameter('real_time', value=True), Parameter('real_time_factor', value=2.0)])
     navigation = NavigationNode(context=context, parameter_overrides=[Parameter('use_sim_time', value=True)])
     client = Node('navigation_test_client', context=context)
-    action = ActionClient(client, Navigate, GraphNames.NAVIGATE_ACTION)
+    action = ActionClient(client, NavigateToPose, GraphNames.NAVIGATE_TO_POSE_ACTION)
     stop = client.create_publisher(Empty, GraphNames.STOP_TOPIC, 10)
     executor = MultiThreadedExecutor(num_threads=8, context=context)
     for node in (bridge, navigation, client):
@@ -51,7 +52,7 @@ def graph(ros_context, spin_until):
 
 
 def send(spin_until, executor, action, feedback: list | None = None, **fields):
-    future = action.send_goal_async(Navigate.Goal(**fields), feedback_callback=(
+    future = action.send_goal_async(NavigateToPose.Goal(**fields), feedback_callback=(
         lambda msg: feedback.append(msg.feedback)) if feedback is not None else None)
     assert spin_until(executor, future.done, timeout=10.0)
     handle = future.result()
@@ -73,10 +74,15 @@ def pose_goal(x: float, y: float, yaw: float) -> PoseStamped:
     return goal
 
 
+def place(name: str) -> PoseStamped:
+    """A named location's approach pose: what the robot API sends for goto_loc(name)."""
+    return pose_goal(*layout.location(name).approach())
+
+
 def test_the_base_drives_to_a_named_place_within_5_cm_and_0_05_rad_with_feedback(graph, spin_until):
     executor, world, action, *_ = graph
     feedback = []
-    response = finish(spin_until, executor, send(spin_until, executor, action, feedback, location_name='the table'))
+    response = finish(spin_until, executor, send(spin_until, executor, action, feedback, pose=place('table')))
     assert response.status == GoalStatus.STATUS_SUCCEEDED, response.result.error_msg
     assert response.result.error_code == Result.NONE
     x, y, yaw = world.base_pose()
@@ -99,16 +105,18 @@ def test_a_goal_inside_furniture_is_refused_as_unreachable_and_the_base_stays(gr
     assert response.status == GoalStatus.STATUS_ABORTED
     assert response.result.error_code == Result.UNREACHABLE
     assert 'inside an obstacle' in response.result.error_msg
-    response = finish(spin_until, executor, send(spin_until, executor, action, location_name='the fridge'))
-    assert response.result.error_code == Result.UNKNOWN_LOCATION
-    assert 'countertop' in response.result.error_msg, 'the known locations are named'
+    elsewhere = place('desk')
+    elsewhere.header.frame_id = 'odom_of_another_robot'
+    response = finish(spin_until, executor, send(spin_until, executor, action, pose=elsewhere))
+    assert response.result.error_code == Result.TF_ERROR
+    assert 'odom_of_another_robot' in response.result.error_msg, 'the frame is named'
     assert math.dist(world.base_pose()[:2], before[:2]) < 0.005
 
 
 def test_the_map_reaches_a_late_subscriber_with_the_table_where_the_base_cannot_stand(graph, spin_until):
     executor, world, _, _, client = graph
     maps = []
-    client.create_subscription(OccupancyGrid, GraphNames.NAVIGATION_MAP_TOPIC, maps.append, LATCHED_QOS)
+    client.create_subscription(OccupancyGrid, GraphNames.COSTMAP_TOPIC, maps.append, LATCHED_QOS)
     assert spin_until(executor, lambda: maps, timeout=10.0)
     grid = conv.occupancy_grid(maps[0])
     table = layout.location('table')
@@ -118,7 +126,7 @@ def test_the_map_reaches_a_late_subscriber_with_the_table_where_the_base_cannot_
 
 def test_stop_halts_the_base_within_half_a_second_of_simulated_time(graph, spin_until):
     executor, world, action, stop, _ = graph
-    handle = send(spin_until, executor, action, location_name='desk')
+    handle = send(spin_until, executor, action, pose=place('desk'))
     assert spin_until(executor, lambda: math.hypot(*world.base_velocity()[:2]) > 0.3, timeout=WAIT), \
         'the base never got going'
     stopped_at = world.time
@@ -132,5 +140,5 @@ def test_stop_halts_the_base_within_half_a_second_of_simulated_time(graph, spin_
     assert spin_until(executor, lambda: world.time >= stopped_at + 1.0, timeout=10.0)
     assert math.dist(world.base_pose()[:2], halted[:2]) < 0.002, 'the base still moved after 0.5 s'
     # The node serves the next goal.
-    response = finish(spin_until, executor, send(spin_until, executor, action, location_name='office chair'))
+    response = finish(spin_until, executor, send(spin_until, executor, action, pose=place('office chair')))
     assert response.result.error_code == Result.NONE, response.result.error_msg

@@ -23,7 +23,8 @@ from std_msgs.msg import Empty
 
 from cap_control.skill_node import ActionGoal, _mark_canceling
 from cap_control.pick_place.node import PickPlaceNode
-from cap_interfaces.action import FollowJointTrajectory, PickPlace
+from cap_interfaces.action import PickPlace
+from control_msgs.action import FollowJointTrajectory
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectState, ResetScene
 from cap_perception.perception_node import PerceptionNode

@@ -23,8 +23,9 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from cap_control.kinematics import HOME_JOINTS, inverse_kinematics, top_down_pose
-from cap_interfaces.action import FollowJointTrajectory, GripperCommand
-from cap_interfaces.msg import GraphNames, JointTolerance, ObjectArray, ObjectSpec
+from cap_interfaces.msg import GraphNames, ObjectArray, ObjectSpec
+from control_msgs.action import FollowJointTrajectory, GripperCommand
+from control_msgs.msg import GripperCommand as GripperCommandMsg, JointTolerance
 from cap_interfaces.srv import ResetScene
 from cap_ros_common.tf import TfListener
 from cap_sim_bridge.bridge_node import SimBridgeNode
@@ -145,7 +146,7 @@ def test_reset_ground_truth_trajectory_gripper_and_images(graph, spin_until):
     # The gripper closes on the 4 cm block (stalls there, squeezing), then opens to 8 cm (reaches it).
     for opening, stalled_at in ((0.0, 0.04), (0.08, None)):
         handle = send_goal(spin_until, executor, client.gripper,
-                           GripperCommand.Goal(position=opening, max_effort=10.0))
+                           GripperCommand.Goal(command=GripperCommandMsg(position=opening, max_effort=10.0)))
         result = wait_for(spin_until, executor, handle.get_result_async())
         assert result.status == GoalStatus.STATUS_SUCCEEDED
         if stalled_at is None:

@@ -31,6 +31,7 @@ setup(
         'console_scripts': [
             'cap = cap_bringup.cli:main',
             'console = cap_bringup.console.node:main',
+            'calibration = cap_bringup.calibration_node:main',
             'visualization_node = cap_bringup.visualization_node:main',
         ],
         # The demos `cap demo NAME` runs (cap_bringup.demos): name = the domain's name, value = the demo's main.

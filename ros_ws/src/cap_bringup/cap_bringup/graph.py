@@ -1,6 +1,7 @@
-"""Bring up a domain's whole graph in one process: the sim bridge, the domain's perception and control nodes (for
-the table top: perception and pick-and-place), lmp_node and the visualization node (RViz's /robot_description and
-/cap/markers).
+"""Bring up a domain's whole graph in one process: the sim bridge and robot_state (standing in for a robot's drivers),
+the domain's perception and control nodes (for the table top: perception and pick-and-place), lmp_node and the
+visualization node (RViz's /cap/markers); in hardware mode (`GraphOptions(hardware=PROFILE)`) the robot's own
+drivers instead of the first two (cap_bringup.hardware).
 
 `cap up`, the demo, the integration tests and the benchmark all start the graph as a `Graph`, so they run the same
 nodes with the same parameters (each node's defaults from its config dataclass, then its package's config/*.yaml,
@@ -62,9 +63,10 @@ def is_quick(node_name: str, parameters: dict[str, Any]) -> bool:
     The RGB-D detector analyses frames in perception's callbacks, which would hold its services up on that one
     thread: with that source perception stays on the multi-threaded executor. The visualization node only sends
     requests and handles answers, and its perception clients are woken by every perception answer of the process
-    (see Graph.__init__): it belongs there too.
+    (see Graph.__init__): it belongs there too, as robot_state (a joint state in, transforms out) and the calibration
+    (transforms sent once).
     """
-    if node_name == 'visualization':
+    if node_name in ('visualization', 'robot_state', 'calibration'):
         return True
     return node_name == 'perception_node' and parameters.get('source', 'ground_truth') != 'rgbd'
 
@@ -85,9 +87,35 @@ class GraphOptions:
     cpu: int | None = 0  # the process is pinned to this one of its allowed CPUs (cpu_affinity.py); None: not pinned
     namespace: str = ''  # e.g. 'robot1': every name of the graph under /robot1 (two graphs side by side)
     domain: str = 'tabletop'  # the domain (cap_lmp_ros.domains) whose prompts, robot API and scene run
+    # A hardware profile (cap_hardware; a file or a shipped profile's name): no simulator, the profile's robot
+    # instead, its domain, RGB-D perception; the options above that concern the simulator are not used.
+    hardware: str = ''
+
+    def profile(self):
+        """The hardware profile (None in simulation)."""
+        if not self.hardware:
+            return None
+        from cap_hardware.profile import load_profile
+        return load_profile(self.hardware)
+
+    def domain_name(self) -> str:
+        profile = self.profile()
+        return profile.domain if profile is not None else self.domain
 
     def overrides(self) -> dict[str, dict[str, Any]]:
         """{node name: {parameter: value}} for the nodes of the domain's graph."""
+        profile = self.profile()
+        if profile is not None:
+            from cap_bringup.hardware import hardware_overrides
+            domain, values = get_domain(profile.domain), hardware_overrides(profile)
+            values['lmp_node'].update({'llm_backend': self.llm_backend, 'record_cassette': self.record_cassette})
+            if self.cassette:
+                values['lmp_node']['cassette'] = str(pathlib.Path(self.cassette).resolve())
+            values = {spec.name: values.get(spec.name, {'use_sim_time': False})
+                      for spec in graph_nodes(domain, hardware=True)}
+            for node, parameters in self.extra.items():
+                values.setdefault(node, {}).update(parameters)
+            return values
         domain = get_domain(self.domain)
         if self.perception == 'rgbd' and self.camera_rate <= 0:
             raise ValueError('perception rgbd reads camera images: camera_rate must be above 0')
@@ -102,7 +130,7 @@ class GraphOptions:
             # A camera sees a fresh stack only once the tool has moved out of its line of sight.
             'pick_place': {'clear_view': self.perception == 'rgbd'},
             'lmp_node': lmp,
-            'visualization': {'scene': domain.scene},
+            'robot_state': {'scene': domain.scene},
         }
         values: dict[str, dict[str, Any]] = {}
         for spec in graph_nodes(domain):
@@ -283,9 +311,11 @@ class Graph:
         quick = self._spinners[1].executor
         self.api_node = None  # the robot API's clients, on the events executor
         self.client_nodes: list[Any] = []  # nodes holding other nodes' perception clients, on the events executor
+        profile = options.profile()
+        self.hardware = profile is not None
         try:
-            self.domain = get_domain(options.domain)
-            for spec in graph_nodes(self.domain):
+            self.domain = get_domain(options.domain_name())
+            for spec in graph_nodes(self.domain, hardware=self.hardware):
                 from_config = config_parameters(spec.package, spec.config_file)
                 values = {**from_config.get('/**', {}), **from_config.get(spec.name, {}),
                           **overrides.get(spec.name, {})}
@@ -301,9 +331,16 @@ class Graph:
                     self.executor.add_node(node)
             # Perception's answers reach every client of its services in the process, waking each client's
             # executor: all of them live on the events executor, where a wake-up for another client is cheap.
-            sim_time = [Parameter('use_sim_time', value=True)]
+            sim_time = [Parameter('use_sim_time', value=not self.hardware)]
+            api_placed = dict(placed)
+            if profile is not None:  # the robot's own servers under the names the profile gives them
+                from cap_bringup.hardware import robot_api_remappings
+                remaps = [argument for name, target in robot_api_remappings(profile)
+                          for argument in ('-r', f'{name}:={target}')]
+                if remaps:
+                    api_placed['cli_args'] = [*placed.get('cli_args', ['--ros-args']), *remaps]
             self.api_node = rclpy.create_node('lmp_node_robot_api', context=context, parameter_overrides=sim_time,
-                                              **placed)
+                                              **api_placed)
             quick.add_node(self.api_node)
             bind_clients = getattr(self.nodes['lmp_node'].robot, 'bind_clients', None)
             if bind_clients is not None:  # a domain's binding may keep its clients on lmp_node itself

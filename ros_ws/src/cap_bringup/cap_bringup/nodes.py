@@ -1,9 +1,11 @@
-"""The nodes of a domain's graph, as `cap up` and the launch file start them (no rclpy here).
+"""The nodes of a domain's graph, as `cap up` and the launch files start them (no rclpy here).
 
-Every graph starts with the simulator; the domain's perception and control nodes come next (`Domain.nodes`), then
-lmp_node and the visualization node (RViz's /robot_description and /cap/markers). Nodes are named by strings
-(cap_lmp_ros.domains.registry.NodeSpec), so that a domain is described without importing its nodes; the one-process
-graph loads the classes, a launch file starts the executables.
+A simulated graph starts with the simulator and robot_state (the robot's links on /tf), which stand in for a robot's
+drivers; the domain's perception and control nodes come next (`Domain.nodes`), then lmp_node and the visualization
+node (/cap/markers for RViz). On a real robot (hardware mode) the drivers are the robot's own: the graph starts the
+calibration's publisher instead, and none of the domain's nodes that stand in for a robot's servers (the navigation
+node, where nav2 runs). Nodes are named by strings (cap_lmp_ros.domains.registry.NodeSpec), so that a domain is
+described without importing its nodes; the one-process graph loads the classes, a launch file starts the executables.
 """
 from __future__ import annotations
 
@@ -13,15 +15,23 @@ from cap_lmp_ros.domains.registry import Domain, NodeSpec
 
 SIM_BRIDGE_NODE = NodeSpec('sim_bridge', 'cap_sim_bridge', 'sim_bridge', 'cap_sim_bridge.bridge_node:SimBridgeNode',
                            'sim_bridge.yaml')
+ROBOT_STATE_NODE = NodeSpec('robot_state', 'cap_sim_bridge', 'robot_state',
+                            'cap_sim_bridge.robot_state_node:RobotStateNode', 'robot_state.yaml')
+CALIBRATION_NODE = NodeSpec('calibration', 'cap_bringup', 'calibration', 'cap_bringup.calibration_node:CalibrationNode',
+                            'calibration.yaml')
 LMP_NODE = NodeSpec('lmp_node', 'cap_lmp_ros', 'lmp_node', 'cap_lmp_ros.lmp_node:LmpNode', 'lmp_node.yaml')
 VISUALIZATION_NODE = NodeSpec('visualization', 'cap_bringup', 'visualization_node',
                               'cap_bringup.visualization_node:VisualizationNode', 'visualization.yaml')
 
 
-def graph_nodes(domain: Domain) -> tuple[NodeSpec, ...]:
-    """The nodes of `domain`'s graph in start order: the simulator first, what serves commands last. Every node but
-    the simulator takes its time from the simulator's /clock (the simulator keeps the wall clock it paces by)."""
-    return (SIM_BRIDGE_NODE, *domain.nodes, LMP_NODE, VISUALIZATION_NODE)
+def graph_nodes(domain: Domain, hardware: bool = False) -> tuple[NodeSpec, ...]:
+    """The nodes of `domain`'s graph in start order: the simulator (or, on a real robot, the calibration) first, what
+    serves commands last. In simulation every node but the simulator takes its time from the simulator's /clock (the
+    simulator keeps the wall clock it paces by)."""
+    if hardware:
+        return (CALIBRATION_NODE, *(spec for spec in domain.nodes if not spec.stand_in), LMP_NODE,
+                VISUALIZATION_NODE)
+    return (SIM_BRIDGE_NODE, ROBOT_STATE_NODE, *domain.nodes, LMP_NODE, VISUALIZATION_NODE)
 
 
 def node_class(spec: NodeSpec) -> type:
@@ -33,4 +43,5 @@ def node_class(spec: NodeSpec) -> type:
         raise ValueError(f'node {spec.name!r}: cannot load {spec.node_class!r} ({error})') from None
 
 
-__all__ = ['LMP_NODE', 'SIM_BRIDGE_NODE', 'VISUALIZATION_NODE', 'graph_nodes', 'node_class']
+__all__ = ['CALIBRATION_NODE', 'LMP_NODE', 'ROBOT_STATE_NODE', 'SIM_BRIDGE_NODE', 'VISUALIZATION_NODE', 'graph_nodes',
+           'node_class']

@@ -1,8 +1,6 @@
-"""visualization: what RViz on a regular ROS 2 install needs to show the table top, from the graph's names only.
+"""visualization: the markers RViz on a regular ROS 2 install shows over the robot (whose model and links come from
+/robot_description and /tf), from the graph's names only.
 
-- /robot_description (std_msgs/String, reliable, transient local: robot_state_publisher's QoS): the robot's URDF,
-  written from the simulator's MuJoCo model of the configured `scene` (cap_sim_bridge.urdf), so RViz's RobotModel
-  and robot_state_publisher read the same kinematics the simulator runs; its joint names are those of /joint_states.
 - /cap/markers (visualization_msgs/MarkerArray, reliable, transient local, keep last 1, so a late RViz gets the
   latest): perception's objects with their names, the plan of the command waiting for approval (kept while it runs
   after approval), the workspace bounds (markers.py). Perception is asked (GetObjectNames, GetObjectState) at
@@ -18,7 +16,6 @@ from typing import Any
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from cap_bringup.markers import Bounds, scene_markers
@@ -27,8 +24,6 @@ from cap_interfaces.srv import GetObjectNames, GetObjectState
 from cap_lmp_ros.lmp_node import EVENT_QOS
 from cap_ros_common.parameters import declare_config, parameter
 from cap_ros_common.qos import LATCHED_QOS
-from cap_sim_bridge.scenes import DEFAULT_SCENE, build_model
-from cap_sim_bridge.urdf import WORLD_LINK, robot_urdf
 from cap_tabletop.workspace import TABLE_X_RANGE, TABLE_Y_RANGE, TABLE_Z
 
 _FINAL = (StatusEvent.STAGE_DONE, StatusEvent.STAGE_ERROR, StatusEvent.STAGE_CANCELLED, StatusEvent.STAGE_REFUSED)
@@ -36,9 +31,8 @@ _FINAL = (StatusEvent.STAGE_DONE, StatusEvent.STAGE_ERROR, StatusEvent.STAGE_CAN
 
 @dataclass(frozen=True)
 class VisualizationConfig:
-    scene: str = parameter(DEFAULT_SCENE, 'Simulator scene whose robot model /robot_description describes.')
     rate_hz: float = parameter(2.0, 'How often the markers are refreshed from perception while subscribed [Hz].')
-    frame_id: str = parameter(WORLD_LINK, 'Frame of the markers (the URDF\'s root link).')
+    frame_id: str = parameter('world', 'Frame of the markers: the frame perception\'s positions are in.')
     x_min: float = parameter(TABLE_X_RANGE[0], 'Workspace bounds shown [m, world frame].')
     x_max: float = parameter(TABLE_X_RANGE[1], 'Workspace bounds shown [m, world frame].')
     y_min: float = parameter(TABLE_Y_RANGE[0], 'Workspace bounds shown [m, world frame].')
@@ -53,9 +47,6 @@ class VisualizationNode(Node):
         super().__init__('visualization', **kwargs)
         config = self.config = declare_config(self, VisualizationConfig)
         self.bounds = Bounds(config.x_min, config.x_max, config.y_min, config.y_max, config.z)
-        self.urdf = robot_urdf(build_model([], config.scene))
-        self._description = self.create_publisher(String, GraphNames.ROBOT_DESCRIPTION_TOPIC, LATCHED_QOS)
-        self._description.publish(String(data=self.urdf))
         self._markers = self.create_publisher(MarkerArray, GraphNames.MARKERS_TOPIC, LATCHED_QOS)
         self._names = self.create_client(GetObjectNames, GraphNames.PERCEPTION_OBJECT_NAMES_SERVICE)
         self._state = self.create_client(GetObjectState, GraphNames.PERCEPTION_OBJECT_STATE_SERVICE)

@@ -1,7 +1,7 @@
 """A domain's graph as one process per node, for a regular ROS 2 Jazzy install (`ros2 launch` of this file): the
-simulator, the domain's perception and control nodes (the table top's by default: perception and pick-and-place),
-lmp_node and the visualization node (/robot_description and /cap/markers for RViz), and with console:=true the web
-console.
+simulator and robot_state (/robot_description and the robot's links on /tf), the domain's perception and control
+nodes (the table top's by default: perception and pick-and-place), lmp_node and the visualization node (/cap/markers
+for RViz), and with console:=true the web console. On a real robot: hardware.launch.py.
 
     ros2 launch cap_bringup tabletop.launch.py                       # simulator in real time, reference cassette
     ros2 launch cap_bringup tabletop.launch.py namespace:=robot1     # every name under /robot1
@@ -67,7 +67,7 @@ def _nodes(context):
     if value['domain']:
         chosen['lmp_node']['domain'] = value['domain']
         chosen['sim_bridge']['scene'] = domain.scene  # the domain brings its scene, as in `cap up --domain`
-    chosen['visualization']['scene'] = domain.scene
+    chosen['robot_state']['scene'] = domain.scene
     console = [Node(package='cap_bringup', executable='console', name='console', **common)] \
         if value['console'].lower() == 'true' else []
     # The simulator, the domain's perception and control nodes, lmp_node, visualization: `cap up`'s graph.

@@ -6,6 +6,8 @@ from typing import Sequence
 
 import numpy as np
 from cap_ros_common.time import duration_msg, to_seconds
+from control_msgs.action import FollowJointTrajectory, GripperCommand
+from control_msgs.msg import JointTolerance
 from geometry_msgs.msg import Point, Pose, PoseStamped
 from nav_msgs.msg import MapMetaData
 from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
@@ -13,8 +15,6 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
 from trajectory_msgs.msg import JointTrajectoryPoint
 
-from cap_interfaces.action import FollowJointTrajectory, GripperCommand
-from cap_interfaces.msg import JointTolerance
 from cap_interfaces.msg import ObjectState as ObjectStateMsg
 from cap_interfaces.srv import GetObjectState
 
@@ -27,8 +27,10 @@ GRIPPER_FINGER_JOINTS = ('gripper_left_finger_joint', 'gripper_right_finger_join
 WORLD_FRAME = 'world'  # the URDF's root: the frame of every cap-ros pose
 
 
-def trajectory_msg(trajectory: JointTrajectory) -> JointTrajectoryMsg:
-    return JointTrajectoryMsg(joint_names=list(trajectory.joint_names), points=[
+def trajectory_msg(trajectory: JointTrajectory, joint_names: Sequence[str] | None = None) -> JointTrajectoryMsg:
+    """The trajectory as trajectory_msgs/JointTrajectory, its joints named `joint_names` (the controller's names of
+    the kinematics' joints, in order) or as the trajectory names them."""
+    return JointTrajectoryMsg(joint_names=list(joint_names or trajectory.joint_names), points=[
         JointTrajectoryPoint(positions=q.tolist(), velocities=v.tolist(), accelerations=a.tolist(),
                              time_from_start=duration_msg(float(t)))
         for t, q, v, a in zip(trajectory.times, trajectory.positions, trajectory.velocities,
@@ -36,17 +38,20 @@ def trajectory_msg(trajectory: JointTrajectory) -> JointTrajectoryMsg:
 
 
 def follow_trajectory_goal(trajectory: JointTrajectory, contact_tolerance: float | None = None,
-                           goal_tolerance: float | None = None) -> FollowJointTrajectory.Goal:
-    """The goal for one trajectory; with a contact tolerance [rad], that is its path tolerance, so that the
-    controller aborts with PATH_TOLERANCE_VIOLATED where the arm touches down; a goal tolerance [rad] is the
-    position tolerance of the end (a tool pressing on a surface stops a few milliradians short)."""
-    goal = FollowJointTrajectory.Goal(trajectory=trajectory_msg(trajectory))
+                           goal_tolerance: float | None = None,
+                           joint_names: Sequence[str] | None = None) -> FollowJointTrajectory.Goal:
+    """The goal for one trajectory (its joints named `joint_names`, the controller's names, if given); with a
+    contact tolerance [rad], that is its path tolerance, so that the controller aborts with PATH_TOLERANCE_VIOLATED
+    where the arm touches down; a goal tolerance [rad] is the position tolerance of the end (a tool pressing on a
+    surface stops a few milliradians short)."""
+    message = trajectory_msg(trajectory, joint_names)
+    goal = FollowJointTrajectory.Goal(trajectory=message)
     if contact_tolerance is not None:
         goal.path_tolerance = [JointTolerance(name=name, position=contact_tolerance, velocity=-1.0,
-                                              acceleration=-1.0) for name in trajectory.joint_names]
+                                              acceleration=-1.0) for name in message.joint_names]
     if goal_tolerance is not None:  # velocity and acceleration 0: the controller's defaults
         goal.goal_tolerance = [JointTolerance(name=name, position=goal_tolerance, velocity=0.0, acceleration=0.0)
-                               for name in trajectory.joint_names]
+                               for name in message.joint_names]
     return goal
 
 
@@ -63,7 +68,10 @@ def arm_outcome(result: FollowJointTrajectory.Result) -> ArmOutcome:
 
 
 def gripper_goal(position: float, max_effort: float) -> GripperCommand.Goal:
-    return GripperCommand.Goal(position=float(position), max_effort=float(max_effort))
+    """A GripperCommand goal; `position` in the gripper controller's units (ArmInterfaces.command_position)."""
+    goal = GripperCommand.Goal()
+    goal.command.position, goal.command.max_effort = float(position), float(max_effort)
+    return goal
 
 
 def object_info(state: ObjectStateMsg) -> ObjectInfo:
@@ -103,10 +111,10 @@ def point_msg(xyz: Sequence[float]) -> Point:
     return Point(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
 
 
-def pose_msg(pose: Sequence[float], stamp) -> PoseStamped:
-    """The mobile base's pose (x [m], y [m], yaw [rad]) in the world frame."""
+def pose_msg(pose: Sequence[float], stamp, frame_id: str = WORLD_FRAME) -> PoseStamped:
+    """The mobile base's pose (x [m], y [m], yaw [rad]) in `frame_id` (the world frame)."""
     msg = PoseStamped()
-    msg.header.frame_id, msg.header.stamp = WORLD_FRAME, stamp
+    msg.header.frame_id, msg.header.stamp = frame_id, stamp
     msg.pose.position.x, msg.pose.position.y = float(pose[0]), float(pose[1])
     msg.pose.orientation.z, msg.pose.orientation.w = math.sin(pose[2] / 2), math.cos(pose[2] / 2)
     return msg
@@ -118,7 +126,13 @@ def yaw_of(msg: PoseStamped) -> float:
     return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
 
 
+def planar_pose(matrix: np.ndarray) -> tuple[float, float, float]:
+    """x [m], y [m] and yaw [rad] of a 4x4 pose (the base's on the floor)."""
+    return float(matrix[0, 3]), float(matrix[1, 3]), math.atan2(matrix[1, 0], matrix[0, 0])
+
+
 OCCUPIED, FREE = 100, 0  # nav_msgs/OccupancyGrid's cell values (-1 would be unknown: the map has none)
+INSCRIBED = 99  # nav2's costmap: a base centred here touches an obstacle
 
 
 def occupancy_grid_msg(grid: OccupancyGrid, frame_id: str, stamp) -> OccupancyGridMsg:
@@ -133,7 +147,8 @@ def occupancy_grid_msg(grid: OccupancyGrid, frame_id: str, stamp) -> OccupancyGr
 
 
 def occupancy_grid(msg: OccupancyGridMsg) -> OccupancyGrid:
-    """The map back as an OccupancyGrid; unknown cells count as occupied. ValueError for a malformed map."""
+    """The map back as an OccupancyGrid: the base's centre may not stand where a cell says 99 or more (nav2's
+    inscribed and lethal costs; this project's maps say 100) or is unknown. ValueError for a malformed map."""
     info = msg.info
     if info.width <= 0 or info.height <= 0 or len(msg.data) != info.width * info.height or \
             not np.isfinite(info.resolution) or info.resolution <= 0:
@@ -143,4 +158,5 @@ def occupancy_grid(msg: OccupancyGridMsg) -> OccupancyGrid:
     # The message's resolution is a float32: 0.05 comes back as 0.0500000007, which would shift cell borders
     # by a nanometre per cell. Maps are given in whole micrometres.
     resolution = round(float(info.resolution), 6)
-    return OccupancyGrid((data != FREE), (float(info.origin.position.x), float(info.origin.position.y)), resolution)
+    blocked = (data >= INSCRIBED) | (data < 0)
+    return OccupancyGrid(blocked, (float(info.origin.position.x), float(info.origin.position.y)), resolution)

@@ -37,13 +37,14 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Empty
 
 from cap_control import ros_conversions as conv
-from cap_control.kinematics import JOINT_NAMES
 from cap_control.ports import (
     Arm, Ending, Gripper, GripperOutcome, Interruption, PendingGoal, Perception, interruption_message,
 )
+from cap_control.robot_interfaces import ArmInterfaces, StateInterfaces
 from cap_control.trajectory import JointTrajectory
-from cap_interfaces.action import FollowJointTrajectory
 from cap_interfaces.msg import GraphNames
+from cap_ros_common.parameters import declare_config
+from control_msgs.action import FollowJointTrajectory, GripperCommand
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 
 READY_CHECK_PERIOD = 0.02  # [s] steady time between looks at a server's availability (rclpy has no event for it)
@@ -134,11 +135,10 @@ class ActionGoal(PendingGoal):
 
 
 class ArmPort(Arm):
-    server_description = f'the arm action {GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION}'
-    joints_description = f'{GraphNames.JOINT_STATES_TOPIC} with the arm joints'
-
     def __init__(self, node: 'ArmNode'):
         self._node = node
+        self.server_description = f'the arm action {node.interfaces.arm_controller_action}'
+        self.joints_description = f'{node.state_interfaces.joint_states_topic} with the arm joints'
 
     def server_ready(self) -> Future:
         return self._node.when_ready(self._node.arm_client.server_is_ready)
@@ -148,7 +148,13 @@ class ArmPort(Arm):
 
     def opening(self) -> float | None:
         msg = self._node.joint_state()
-        return None if msg is None else conv.gripper_opening(msg)
+        if msg is None:
+            return None
+        interfaces = self._node.interfaces
+        if not interfaces.gripper_joint:
+            return conv.gripper_opening(msg)
+        position = conv.joint_positions(msg, (interfaces.gripper_joint,))
+        return None if position is None else interfaces.opening(float(position[0]))
 
     def state_time(self) -> float | None:
         msg = self._node.joint_state()
@@ -156,24 +162,28 @@ class ArmPort(Arm):
 
     def follow(self, trajectory: JointTrajectory, contact_tolerance: float | None,
                goal_tolerance: float | None = None) -> PendingGoal:
-        return ActionGoal(self._node.arm_client,
-                          conv.follow_trajectory_goal(trajectory, contact_tolerance, goal_tolerance), conv.arm_outcome)
+        goal = conv.follow_trajectory_goal(trajectory, contact_tolerance, goal_tolerance,
+                                           self._node.interfaces.arm_joints)
+        return ActionGoal(self._node.arm_client, goal, conv.arm_outcome)
 
 
 class GripperPort(Gripper):
-    """The gripper's GripperCommand action, through the node's `gripper_client`."""
-
-    server_description = f'the gripper action {GraphNames.SIM_GRIPPER_ACTION}'
+    """The gripper's GripperCommand action, through the node's `gripper_client`: openings [m] in, the controller's
+    units on the wire (ArmInterfaces)."""
 
     def __init__(self, node: 'ArmNode'):
         self._node = node
+        self.server_description = f'the gripper action {node.interfaces.gripper_action}'
 
     def server_ready(self) -> Future:
         return self._node.when_ready(self._node.gripper_client.server_is_ready)
 
     def command(self, position: float, max_effort: float) -> PendingGoal:
-        return ActionGoal(self._node.gripper_client, conv.gripper_goal(position, max_effort),
-                          lambda result: GripperOutcome(float(result.position), bool(result.stalled)))
+        interfaces = self._node.interfaces
+        return ActionGoal(self._node.gripper_client, conv.gripper_goal(interfaces.command_position(position),
+                                                                       max_effort),
+                          lambda result: GripperOutcome(interfaces.opening(float(result.position)),
+                                                        bool(result.stalled)))
 
 
 class PerceptionPort(Perception):
@@ -223,7 +233,8 @@ class GoalNode(Node):
         self._run_lock = threading.Lock()
         self._running: tuple[bytes, Interruption] | None = None  # the goal id being executed and its interruption
         self._early_cancels: set[bytes] = set()  # goals cancelled before their execution began
-        self.create_subscription(JointState, GraphNames.JOINT_STATES_TOPIC, self._on_joint_state, 10,
+        self.state_interfaces = declare_config(self, StateInterfaces)
+        self.create_subscription(JointState, self.state_interfaces.joint_states_topic, self._on_joint_state, 10,
                                  callback_group=callbacks)
         self.create_subscription(Empty, GraphNames.STOP_TOPIC, self._on_stop, 10, callback_group=callbacks)
 
@@ -380,20 +391,26 @@ class GoalNode(Node):
 
 
 class ArmNode(GoalNode):
-    """A GoalNode that moves the arm: pick_place, follow_path and mobile_pick_place."""
+    """A GoalNode that moves the arm and its gripper: pick_place, follow_path and mobile_pick_place. Where their
+    controllers are is in its ArmInterfaces parameters."""
 
     def __init__(self, name: str, **kwargs) -> None:
         super().__init__(name, **kwargs)
-        self.arm_client = ActionClient(self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION,
+        self.interfaces = declare_config(self, ArmInterfaces)
+        self.interfaces.validate()
+        self.arm_client = ActionClient(self, FollowJointTrajectory, self.interfaces.arm_controller_action,
                                        callback_group=self.callbacks)
+        self.gripper_client = ActionClient(self, GripperCommand, self.interfaces.gripper_action,
+                                           callback_group=self.callbacks)
 
     def destroy_node(self) -> None:
         self.arm_client.destroy()
+        self.gripper_client.destroy()
         super().destroy_node()
 
     def arm_joints(self) -> Future:
-        """Completes with the arm joints of the first joint state that has them all."""
-        return self.joints(JOINT_NAMES)
+        """Completes with the arm joints (in the kinematics' order) of the first joint state that has them all."""
+        return self.joints(tuple(self.interfaces.arm_joints))
 
 
 def _mark_canceling(goal_handle, timeout_s: float = 1.0) -> bool:

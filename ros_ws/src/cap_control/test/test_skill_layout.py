@@ -55,7 +55,8 @@ def test_every_skill_has_the_same_shape():
                                                                        'node.py'}, skill
         assert re.search(r'^def main\(', (CODE / skill / 'node.py').read_text(encoding='utf-8'), re.M), skill
     top = {path.stem for path in CODE.glob('*.py')}
-    assert top == {'__init__', *SHARED_PURE, 'skill_node', 'ros_conversions'}
+    # Below the nodes too: the ROS plumbing they share, and the parameters naming the robot's interfaces.
+    assert top == {'__init__', *SHARED_PURE, 'skill_node', 'ros_conversions', 'robot_interfaces'}
 
 
 def test_no_node_module_imports_another_node_module():

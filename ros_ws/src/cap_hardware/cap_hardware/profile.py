@@ -55,6 +55,9 @@ class GripperProfile:
     closed_position: float = 0.8
     max_opening: float = 0.085  # [m] between the fingers when open
     max_effort: float = 100.0  # [N] the largest grip force the graph asks for
+    # A joint of the joint states whose position is in the command's units (a Robotiq's knuckle joint), read for
+    # how far the fingers are open; empty: the opening is known only from each command's result.
+    joint: str = ''
 
     def position_for(self, opening: float) -> float:
         """The command position that opens the fingers `opening` metres (clamped to what the gripper can)."""

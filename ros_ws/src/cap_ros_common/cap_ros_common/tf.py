@@ -44,12 +44,19 @@ class TfListener:
     def __init__(self, node, buffer: TransformBuffer | None = None, callback_group=None,
                  on_update: Callable[[], None] | None = None) -> None:
         self.buffer = buffer or TransformBuffer()
+        self._node = node
         self._on_update = on_update
         self._subscriptions = [
             node.create_subscription(TFMessage, TF_TOPIC, lambda m: self._take(m, False), TF_QOS,
                                      callback_group=callback_group),
             node.create_subscription(TFMessage, TF_STATIC_TOPIC, lambda m: self._take(m, True), TF_STATIC_QOS,
                                      callback_group=callback_group)]
+
+    def destroy(self) -> None:
+        """Stop listening (a binding that moves to another node makes a new listener there)."""
+        for subscription in self._subscriptions:
+            self._node.destroy_subscription(subscription)
+        self._subscriptions = []
 
     def _take(self, message: TFMessage, static: bool) -> None:
         transforms = []

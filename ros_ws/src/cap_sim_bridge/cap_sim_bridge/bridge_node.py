@@ -52,7 +52,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 from trajectory_msgs.msg import JointTrajectoryPoint
 
-from cap_interfaces.action import FollowJointTrajectory, GripperCommand
+from control_msgs.action import FollowJointTrajectory, GripperCommand
 from cap_interfaces.msg import GraphNames, ObjectArray
 from cap_interfaces.srv import ControlStep, GetInk, PushTool, ResetScene
 from cap_ros_common.actions import RESULT_TIMEOUT_S
@@ -65,7 +65,7 @@ from cap_sim_bridge import ros_conversions as conv
 from cap_sim_bridge import trajectory_goal
 from cap_sim_bridge.pacing import LoopPacing
 from cap_sim_bridge.rest import RestWatch
-from cap_sim_bridge.config import SimBridgeConfig, cameras_to_publish
+from cap_sim_bridge.config import SimBridgeConfig, cameras_to_publish, gripper_opening, gripper_position
 from cap_sim_bridge.lockstep import Lockstep
 from cap_sim_bridge.mobile_base import BASE_JOINT_NAMES
 from cap_sim_bridge.urdf import BASE_LINK
@@ -129,7 +129,7 @@ class SimBridgeNode(Node):
         self._cameras = cameras_to_publish(config.cameras, self.world.scene.camera_names, self.world.camera_names)
 
         self._clock_pub = self.create_publisher(Clock, GraphNames.CLOCK_TOPIC, STATE_QOS)
-        self._joint_pub = self.create_publisher(JointState, GraphNames.JOINT_STATES_TOPIC, STATE_QOS)
+        self._joint_pub = self.create_publisher(JointState, config.joint_states_topic, STATE_QOS)
         self._objects_pub = self.create_publisher(ObjectArray, GraphNames.SIM_OBJECTS_TOPIC, LATCHED_QOS)
         self._camera_pubs = {
             camera: {
@@ -150,7 +150,7 @@ class SimBridgeNode(Node):
             self.create_service(GetInk, GraphNames.SIM_GET_INK_SERVICE, self._on_get_ink, callback_group=callbacks)
         self._ink_rate = config.ink_rate
         self._trajectory_server = ActionServer(
-            self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION,
+            self, FollowJointTrajectory, config.arm_controller_action,
             lambda handle: self._while_running(self._execute_trajectory, handle, self._arm_target()),
             goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
             result_timeout=RESULT_TIMEOUT_S, callback_group=callbacks)
@@ -159,12 +159,12 @@ class SimBridgeNode(Node):
         self._base_server = None
         if self.world.base is not None:
             self._base_server = ActionServer(
-                self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_BASE_TRAJECTORY_ACTION,
+                self, FollowJointTrajectory, config.base_controller_action,
                 lambda handle: self._while_running(self._execute_trajectory, handle, self._base_target()),
                 goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
                 result_timeout=RESULT_TIMEOUT_S, callback_group=callbacks)
         self._gripper_server = ActionServer(
-            self, GripperCommand, GraphNames.SIM_GRIPPER_ACTION,
+            self, GripperCommand, config.gripper_action,
             lambda handle: self._while_running(self._execute_gripper, handle),
             goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
             result_timeout=RESULT_TIMEOUT_S, callback_group=callbacks)
@@ -549,10 +549,10 @@ class SimBridgeNode(Node):
 
     # ------------------------------------------------------------------------------------------- gripper
     def _execute_gripper(self, goal_handle) -> GripperCommand.Result:
-        world = self.world
-        request = goal_handle.request
+        world, config = self.world, self.config
+        command = goal_handle.request.command
         with world.lock:
-            world.command_gripper(request.position, request.max_effort)
+            world.command_gripper(gripper_opening(config, command.position), command.max_effort)
             target = world.gripper_state().target_opening
             deadline = world.time + self._gripper_timeout
         still_since = None
@@ -562,7 +562,8 @@ class SimBridgeNode(Node):
                 state = world.gripper_state()
                 now = world.time
             reached = abs(state.opening - state.target_opening) <= GRIPPER_POSITION_TOLERANCE
-            outcome = GripperCommand.Result(position=state.opening, effort=state.force, stalled=False,
+            position = gripper_position(config, state.opening)
+            outcome = GripperCommand.Result(position=position, effort=state.force, stalled=False,
                                             reached_goal=reached)
             if goal_handle.is_cancel_requested:
                 # The fingers stay where they are, keeping whatever grip they have.
@@ -574,7 +575,7 @@ class SimBridgeNode(Node):
                 return outcome
             if time.monotonic() - last_feedback >= FEEDBACK_PERIOD:
                 last_feedback = time.monotonic()
-                goal_handle.publish_feedback(GripperCommand.Feedback(position=state.opening, effort=state.force,
+                goal_handle.publish_feedback(GripperCommand.Feedback(position=position, effort=state.force,
                                                                      stalled=False, reached_goal=reached))
             still = not state.reference_moving and state.speed < 2e-3
             still_since = (still_since if still_since is not None else now) if still else None
@@ -587,7 +588,6 @@ class SimBridgeNode(Node):
                 goal_handle.abort()
                 return outcome
             time.sleep(POLL_PERIOD)
-
 
 def main(args=None) -> None:
     rclpy.init(args=args)

@@ -3,11 +3,12 @@ from __future__ import annotations
 
 import dataclasses
 
+from cap_interfaces.msg import GraphNames
 from cap_ros_common.parameters import parameter
 from cap_tabletop.cameras import CAMERA_NAMES
 
 from cap_sim_bridge import trajectory_goal
-from cap_sim_bridge.scenes import DEFAULT_SCENE
+from cap_sim_bridge.scenes import DEFAULT_SCENE, GRIPPER_MAX_OPENING
 
 # The bridge publishes the scene's own cameras while `cameras` is left at this default.
 DEFAULT_CAMERAS = tuple(CAMERA_NAMES)
@@ -45,11 +46,36 @@ class SimBridgeConfig:
     goal_time_tolerance: float = parameter(trajectory_goal.DEFAULT_GOAL_TIME_TOLERANCE,
                                            "Default time after a trajectory's end to meet the goal tolerance [s].")
     gripper_timeout: float = parameter(5.0, 'Longest gripper motion [s of simulated time].')
+    arm_controller_action: str = parameter(GraphNames.SIM_FOLLOW_JOINT_TRAJECTORY_ACTION,
+                                           'control_msgs/FollowJointTrajectory action served for the arm.')
+    base_controller_action: str = parameter(GraphNames.SIM_FOLLOW_BASE_TRAJECTORY_ACTION,
+                                            'In a scene with a mobile base: control_msgs/FollowJointTrajectory action '
+                                            'served for its x, y and yaw joints.')
+    gripper_action: str = parameter(GraphNames.SIM_GRIPPER_ACTION, 'control_msgs/GripperCommand action served for '
+                                    'the gripper.')
+    gripper_open_position: float = parameter(GRIPPER_MAX_OPENING, 'The GripperCommand position of a fully open '
+                                             'gripper: the simulator speaks the opening in metres; a stand-in for a '
+                                             'Robotiq speaks its knuckle angle (0.0).')
+    gripper_closed_position: float = parameter(0.0, 'The GripperCommand position of a fully closed gripper (a '
+                                               'Robotiq\'s knuckle: 0.8).')
+    joint_states_topic: str = parameter(GraphNames.JOINT_STATES_TOPIC, 'Where the joint states go.')
     ink_rate: float = parameter(5.0, 'In a scene with a whiteboard: most ink images a second of simulated time, '
                                      'sent only when the ink changed [Hz].')
     lockstep_timeout: float = parameter(5.0, 'A controller stepping a plant (ControlStep) that sends no request for '
                                              'this long [s of wall time] loses it: the plant is made safe and the '
                                              'simulation runs freely again.')
+
+
+def gripper_opening(config: SimBridgeConfig, position: float) -> float:
+    """The opening [m] a GripperCommand position asks for, in the configured units."""
+    span = config.gripper_open_position - config.gripper_closed_position
+    return GRIPPER_MAX_OPENING * (position - config.gripper_closed_position) / span
+
+
+def gripper_position(config: SimBridgeConfig, opening: float) -> float:
+    """The GripperCommand position of an opening [m], in the configured units."""
+    span = config.gripper_open_position - config.gripper_closed_position
+    return config.gripper_closed_position + span * opening / GRIPPER_MAX_OPENING
 
 
 def cameras_to_publish(requested: tuple[str, ...], scene_default: tuple[str, ...],

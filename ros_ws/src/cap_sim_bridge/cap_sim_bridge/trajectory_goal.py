@@ -3,7 +3,8 @@
 Semantics kept from control_msgs / ros2_control's joint trajectory controller:
 - joint_names may be any subset of the arm's joints in any order; joints left out hold their current reference;
 - time_from_start is relative to the moment the goal starts (header.stamp is not used for delayed starts);
-- a tolerance of 0 means the default, a negative one means "not checked".
+- a tolerance of 0 means the default, a negative one means "not checked";
+- joints with several axes (multi_dof_trajectory, component tolerances) are refused: this arm has none.
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from typing import Sequence
 import numpy as np
 from cap_ros_common.time import to_seconds
 
-# FollowJointTrajectory result codes (cap_interfaces mirrors control_msgs).
+# control_msgs/FollowJointTrajectory's result codes.
 SUCCESSFUL = 0
 INVALID_GOAL = -1
 INVALID_JOINTS = -2
@@ -83,6 +84,12 @@ def plan_from_goal(goal, arm_joint_names: Sequence[str], hold_positions: np.ndar
     """Check a FollowJointTrajectory goal and express it in the arm's joint order. Raises GoalError."""
     arm_joint_names = list(arm_joint_names)
     trajectory = goal.trajectory
+    if goal.multi_dof_trajectory.joint_names or goal.multi_dof_trajectory.points:
+        raise GoalError(INVALID_JOINTS, 'multi_dof_trajectory names joints this controller does not have (it moves '
+                                        f'{list(arm_joint_names)})')
+    if goal.component_path_tolerance or goal.component_goal_tolerance:
+        raise GoalError(INVALID_GOAL, 'component tolerances apply to multi-DOF joints, which this controller does '
+                                      'not have')
     names = list(trajectory.joint_names)
     if not names:
         raise GoalError(INVALID_JOINTS, 'the trajectory names no joints')

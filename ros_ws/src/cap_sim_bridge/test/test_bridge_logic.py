@@ -6,8 +6,8 @@ import pytest
 from builtin_interfaces.msg import Duration
 from trajectory_msgs.msg import JointTrajectoryPoint
 
-from cap_interfaces.action import FollowJointTrajectory
-from cap_interfaces.msg import JointTolerance
+from control_msgs.action import FollowJointTrajectory
+from control_msgs.msg import JointTolerance
 from cap_sim_bridge import trajectory_goal
 from cap_sim_bridge.pacing import LoopPacing, Pacer
 from cap_sim_bridge.world import ARM_JOINT_NAMES

@@ -1,15 +1,16 @@
-"""navigation: the Navigate and NavigateThroughPoses actions (/cap/control/navigate, .../navigate_through_poses)
-over the mobile base's FollowJointTrajectory action, and the base's pose (/cap/control/get_base_pose).
+"""navigation: nav2's NavigateToPose and NavigateThroughPoses actions (under nav2's names, navigate_to_pose and
+navigate_through_poses) over the mobile base's FollowJointTrajectory action: the simulator's stand-in for nav2.
 
 The work is cap_control.navigation.executor's: this node binds its port to ROS (the simulator's base trajectory
-action, the base's joints in /joint_states) and serves the actions with it, one goal at a time: a Navigate goal
-names a location of the kitchen (location_name) or a pose in the map frame, a NavigateThroughPoses goal poses to
-reach in order; feedback carries the base's pose, the time since the goal began, the time and distance left, the
-recoveries made (and the poses left); a cancel of the goal or a message on the stop topic halts the base where it
-is (the goal ends CANCELED, aborted for a stop). Its map (the furniture inflated by the base, where the base's
-centre may not stand) goes out once on /cap/control/navigation/map, so that other nodes choose spots it accepts.
-Error codes are nav2's and this project's (UNKNOWN_LOCATION,
-UNREACHABLE, CANCELLED). Parameters are declared from NavigationConfig, whose fields hold every default.
+action, the base's joints in the joint states: its localisation is perfect) and serves the actions with it, one goal
+at a time: a NavigateToPose goal is a pose in the map (or world) frame, a NavigateThroughPoses goal poses to reach in
+order; feedback carries the base's pose, the time since the goal began, the time and distance left, the recoveries
+made (and the poses left); a cancel of the goal or a message on the stop topic halts the base where it is (the goal
+ends CANCELED, aborted for a stop). Named locations are the robot API's to resolve into poses (nav2 takes poses).
+Its map (the furniture inflated by the base, where the base's centre may not stand) goes out once under the name of
+nav2's global costmap, so that other nodes choose spots it accepts. Error codes follow nav2's (the planner's
+NO_VALID_PATH, 208, for an unreachable goal; the navigator's from 9000). Parameters: NavigationConfig and
+NavigationInterfaces, whose fields hold every default.
 """
 from __future__ import annotations
 
@@ -32,19 +33,19 @@ from cap_control.navigation.executor import (
 from cap_control.navigation.plan import NavigateErrorCode
 from cap_control.ports import ArmOutcome, ArmResult, Ending, PendingGoal
 from cap_control.skill_node import ActionGoal, GoalNode, spin_node
-from cap_interfaces.action import FollowJointTrajectory, Navigate, NavigateThroughPoses
-from cap_interfaces.msg import GraphNames, JointTolerance
-from cap_interfaces.srv import GetBasePose
+from cap_control.robot_interfaces import NavigationInterfaces
+from control_msgs.action import FollowJointTrajectory
+from control_msgs.msg import JointTolerance
+from nav2_msgs.action import NavigateThroughPoses, NavigateToPose
 
 # Poses are in the world frame (conv.WORLD_FRAME); goals may also name it "map", nav2's name.
 ACCEPTED_FRAMES = ('', conv.WORLD_FRAME, 'map')
 
 
 class _BasePort(Base):
-    server_description = f'the base action {GraphNames.SIM_FOLLOW_BASE_TRAJECTORY_ACTION}'
-
     def __init__(self, node: 'NavigationNode'):
         self._node = node
+        self.server_description = f'the base action {node.interfaces.base_controller_action}'
 
     def server_ready(self) -> Future:
         return self._node.when_ready(self._node.base_client.server_is_ready)
@@ -92,19 +93,18 @@ class NavigationNode(GoalNode):
         super().__init__('navigation', **kwargs)
         self.config = declare_config(self, NavigationConfig)
         self.set_timeouts(self.config.server_timeout, self.config.service_timeout)
-        self.base_client = ActionClient(self, FollowJointTrajectory, GraphNames.SIM_FOLLOW_BASE_TRAJECTORY_ACTION,
+        self.interfaces = names = declare_config(self, NavigationInterfaces)
+        self.base_client = ActionClient(self, FollowJointTrajectory, names.base_controller_action,
                                         callback_group=self.callbacks)
         self.navigation = NavigationExecutor(_BasePort(self), self.config, log=self._log)
         self._servers = [
-            ActionServer(self, Navigate, GraphNames.NAVIGATE_ACTION, self._execute,
+            ActionServer(self, NavigateToPose, names.navigate_to_pose_action, self._execute,
                          goal_callback=self._on_goal, cancel_callback=self._on_cancel,
                          result_timeout=RESULT_TIMEOUT_S, callback_group=self.callbacks),
-            ActionServer(self, NavigateThroughPoses, GraphNames.NAVIGATE_THROUGH_POSES_ACTION,
+            ActionServer(self, NavigateThroughPoses, names.navigate_through_poses_action,
                          self._execute_through_poses, goal_callback=self._on_goal, cancel_callback=self._on_cancel,
                          result_timeout=RESULT_TIMEOUT_S, callback_group=self.callbacks)]
-        self.create_service(GetBasePose, GraphNames.BASE_POSE_SERVICE, self._on_base_pose,
-                            callback_group=self.callbacks)
-        self.map_publisher = self.create_publisher(OccupancyGridMsg, GraphNames.NAVIGATION_MAP_TOPIC,
+        self.map_publisher = self.create_publisher(OccupancyGridMsg, names.costmap_topic,
                                                    LATCHED_QOS)  # sent once, never changes
         self.map_publisher.publish(conv.occupancy_grid_msg(self.navigation.static_grid, conv.WORLD_FRAME,
                                                            self.get_clock().now().to_msg()))
@@ -116,25 +116,15 @@ class NavigationNode(GoalNode):
         self.base_client.destroy()
         super().destroy_node()
 
-    def _on_base_pose(self, _request, response: GetBasePose.Response) -> GetBasePose.Response:
-        msg = self.joint_state()
-        pose = None if msg is None else conv.joint_positions(msg, BASE_JOINT_NAMES)
-        if pose is None:
-            response.success, response.message = False, f'no joint state with the base\'s joints {BASE_JOINT_NAMES} yet'
-            return response
-        response.success = True
-        response.pose = conv.pose_msg(pose, msg.header.stamp)
-        return response
-
-    def _execute(self, goal_handle) -> Navigate.Result:
+    def _execute(self, goal_handle) -> NavigateToPose.Result:
         goal = goal_handle.request
-        result = Navigate.Result()
+        result = NavigateToPose.Result()
 
         def run(interruption):
-            if not goal.location_name.strip() and goal.pose.header.frame_id not in ACCEPTED_FRAMES:
+            if goal.pose.header.frame_id not in ACCEPTED_FRAMES:
                 return self._refuse_frame(result, goal.pose.header.frame_id)
             position = goal.pose.pose.position
-            request = NavigateRequest(goal.location_name, (position.x, position.y, conv.yaw_of(goal.pose)))
+            request = NavigateRequest(pose=(position.x, position.y, conv.yaw_of(goal.pose)))
             outcome = self.navigation.run(request, interruption,
                                           lambda progress: self._feedback(goal_handle, progress))
             result.error_code, result.error_msg = int(outcome.code), outcome.message
@@ -165,7 +155,7 @@ class NavigationNode(GoalNode):
     @staticmethod
     def _refuse_frame(result, frame: str) -> NavigateOutcome:
         """A goal in another frame: no transforms here (the base's pose is known in the world frame only)."""
-        result.error_code = Navigate.Result.TF_ERROR
+        result.error_code = int(NavigateErrorCode.TF_ERROR)
         result.error_msg = f'goal poses must be in the world frame ("world", "map" or empty), not {frame!r}'
         return NavigateOutcome(Ending.FAILED, NavigateErrorCode.TF_ERROR, result.error_msg)
 
@@ -179,7 +169,7 @@ class NavigationNode(GoalNode):
             goal_handle.publish_feedback(NavigateThroughPoses.Feedback(
                 number_of_poses_remaining=int(progress.poses_remaining), **fields))
         else:
-            goal_handle.publish_feedback(Navigate.Feedback(**fields))
+            goal_handle.publish_feedback(NavigateToPose.Feedback(**fields))
 
 
 def main(args=None) -> None:

@@ -24,15 +24,16 @@ from scipy import ndimage
 
 
 class NavigateErrorCode(enum.IntEnum):
-    """The Navigate action's error codes (nav2's, and this project's from 9100)."""
+    """The navigation's error codes, in nav2's terms: nav2 reports the code of the server that failed (the planner's
+    from 200, its navigator's from 9000); this project's own from 9100."""
 
     NONE = 0
+    UNREACHABLE = 208  # nav2's planner: NO_VALID_PATH
     UNKNOWN = 9000
     TF_ERROR = 9002
     TIMEOUT = 9003
-    UNKNOWN_LOCATION = 9100
-    UNREACHABLE = 9101
-    CANCELLED = 9102
+    UNKNOWN_LOCATION = 9100  # a location name the executor was asked for is not the kitchen's
+    CANCELLED = 9102  # stopped (cap/stop): the base holds where it is
 
 
 class NavigationError(Exception):

@@ -10,7 +10,7 @@ one goal at a time, stop) is cap_control.skill_node's.
 """
 from __future__ import annotations
 
-from cap_ros_common.actions import RESULT_TIMEOUT_S, ActionClient
+from cap_ros_common.actions import RESULT_TIMEOUT_S
 from cap_ros_common.parameters import declare_config
 from rclpy.action import ActionServer
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -19,7 +19,7 @@ from cap_control import ros_conversions as conv
 from cap_control.pick_place.executor import ExecutionConfig, MotionSettings, PickPlaceExecutor, PickPlaceRequest
 from cap_control.pick_place.plan import PickPlaceConfig, StageName
 from cap_control.skill_node import ArmNode, ArmPort, GripperPort, PerceptionPort, spin_node
-from cap_interfaces.action import GripperCommand, PickPlace
+from cap_interfaces.action import PickPlace
 from cap_interfaces.msg import GraphNames
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 
@@ -35,8 +35,6 @@ class PickPlaceNode(ArmNode):
         self.timeouts = declare_config(self, ExecutionConfig)
         self.set_timeouts(self.timeouts.server_timeout, self.timeouts.service_timeout)
         self._create_perception_clients(self)
-        self.gripper_client = ActionClient(self, GripperCommand, GraphNames.SIM_GRIPPER_ACTION,
-                                           callback_group=self.callbacks)
         self.pick_place = PickPlaceExecutor(ArmPort(self), GripperPort(self), PerceptionPort(self), self.config,
                                            self.timeouts, stop_source=GraphNames.STOP_TOPIC, log=self._log)
         self._server = ActionServer(self, PickPlace, GraphNames.PICK_PLACE_ACTION, self._execute,
@@ -66,7 +64,6 @@ class PickPlaceNode(ArmNode):
 
     def destroy_node(self) -> None:
         self._server.destroy()
-        self.gripper_client.destroy()
         super().destroy_node()
 
     def _execute(self, goal_handle) -> PickPlace.Result:

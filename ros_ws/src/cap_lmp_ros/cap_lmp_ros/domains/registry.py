@@ -53,7 +53,8 @@ class NodeSpec:
 
     Named by strings, so that a domain is described without importing its nodes (nor rclpy): `node_class`
     ('module:Class') is what the one-process graph builds, `executable` what a launch file starts, and
-    `config_file` the parameter file in the package's share/config folder.
+    `config_file` the parameter file in the package's share/config folder. `stand_in`: the node plays a server a
+    real robot brings (the navigation node plays nav2), so hardware mode does not start it.
     """
 
     name: str
@@ -61,6 +62,7 @@ class NodeSpec:
     executable: str
     node_class: str
     config_file: str
+    stand_in: bool = False
 
 
 # The nodes of the table top, which other domains reuse: perception of the objects, and pick-and-place.

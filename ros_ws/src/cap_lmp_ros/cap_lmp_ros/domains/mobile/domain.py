@@ -16,8 +16,9 @@ ROBOT_FUNCTIONS = ('get_obj_names', 'get_visible_obj_names', 'is_obj_visible', '
                    'place_at_pos', 'place_at_obj', 'say')
 QUERY_FUNCTIONS = ('get_obj_names', 'get_visible_obj_names', 'is_obj_visible', 'get_obj_pos', 'get_loc_names',
                    'get_loc_pos', 'get_robot_pos_and_angle')  # read the world only
+# The simulator's nav2: on a real robot, nav2 itself serves NavigateToPose and NavigateThroughPoses.
 NAVIGATION_NODE = NodeSpec('navigation', 'cap_control', 'navigation', 'cap_control.navigation.node:NavigationNode',
-                           'navigation.yaml')
+                           'navigation.yaml', stand_in=True)
 MOBILE_PICK_PLACE_NODE = NodeSpec('mobile_pick_place', 'cap_control', 'mobile_pick_place',
                                   'cap_control.mobile_pick_place.node:MobilePickPlaceNode', 'mobile_pick_place.yaml')
 

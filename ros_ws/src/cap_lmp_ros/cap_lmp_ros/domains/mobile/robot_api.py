@@ -3,8 +3,9 @@
 Objects are perception's: `get_obj_names()` every object it knows of, `get_visible_obj_names()` and
 `is_obj_visible(name)` what the head camera sees now, `get_obj_pos(name)` where an object is (np.array([x, y]) on
 the floor plan). Locations are the kitchen's facts (cap_mobile.layout): `get_loc_names()` and `get_loc_pos(name)`
-answer without asking the graph. The robot's pose comes from the navigation node (`get_base_pose`); `goto_loc(name)`,
-`goto_pos(pos, angle=None)` and `follow_traj(pts)` are goals of its Navigate and NavigateThroughPoses actions.
+answer without asking the graph. The robot's pose is base_link's in the map frame on tf (REP-105); `goto_loc(name)`
+(a location's approach pose), `goto_pos(pos, angle=None)` and `follow_traj(pts)` are goals of nav2's NavigateToPose
+and NavigateThroughPoses actions, under nav2's names (the navigation node serves them in the simulator).
 `pick_obj(name)`, `place_at_pos(pos)` and `place_at_obj(name)` are goals of mobile_pick_place's MobilePickPlace
 action (the base drives within reach first). `say` and the plumbing are the shared RosRobotApi's
 (cap_lmp_ros.domains.ros_api). A goal the navigation node refuses (a point inside furniture, no way there) raises
@@ -13,6 +14,7 @@ RobotApiError with its reason; a stop cancels the drive and raises StoppedError.
 from __future__ import annotations
 
 import math
+import time
 from typing import Any, Callable
 
 import numpy as np
@@ -22,19 +24,22 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
-from cap_interfaces.action import MobilePickPlace, Navigate, NavigateThroughPoses
+from cap_interfaces.action import MobilePickPlace
 from cap_interfaces.msg import GraphNames
-from cap_interfaces.srv import GetBasePose, GetObjectNames
+from cap_interfaces.srv import GetObjectNames
+from cap_ros_common.tf import TfListener
+from cap_ros_common.transforms import TransformError
+from nav2_msgs.action import NavigateThroughPoses, NavigateToPose
 from cap_lmp.errors import RobotApiError, StoppedError
 from cap_lmp_ros.domains.mobile.poses import floor_point, heading, location_name, traj_poses
 from cap_lmp_ros.domains.ros_api import RosRobotApi
 
-WORLD_FRAME = 'world'  # the frame of every cap-ros pose (the navigation node also takes nav2's 'map')
+MAP_FRAME, BASE_FRAME = 'map', 'base_link'  # REP-105: the simulator's map is its world, as a localised robot's is
 
 
 def pose_stamped(x: float, y: float, yaw: float) -> PoseStamped:
     msg = PoseStamped()
-    msg.header.frame_id = WORLD_FRAME
+    msg.header.frame_id = MAP_FRAME
     msg.pose.position.x, msg.pose.position.y = float(x), float(y)
     msg.pose.orientation.z, msg.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
     return msg
@@ -48,15 +53,15 @@ class RosMobileApi(RosRobotApi):
     def _create_clients(self, node: Node) -> None:
         super()._create_clients(node)
         group = ReentrantCallbackGroup()
-        self._navigate = ActionClient(node, Navigate, GraphNames.NAVIGATE_ACTION, callback_group=group)
+        self._navigate = ActionClient(node, NavigateToPose, GraphNames.NAVIGATE_TO_POSE_ACTION, callback_group=group)
         self._through = ActionClient(node, NavigateThroughPoses, GraphNames.NAVIGATE_THROUGH_POSES_ACTION,
                                      callback_group=group)
-        self._base_pose = node.create_client(GetBasePose, GraphNames.BASE_POSE_SERVICE, callback_group=group)
+        self._tf = TfListener(node, callback_group=group)
         self._pick_place = ActionClient(node, MobilePickPlace, GraphNames.MOBILE_PICK_PLACE_ACTION,
                                         callback_group=group)
 
     def _clients(self) -> list[Any]:
-        return super()._clients() + [self._navigate, self._through, self._base_pose, self._pick_place]
+        return super()._clients() + [self._navigate, self._through, self._tf, self._pick_place]
 
     def functions(self) -> dict[str, Callable[..., Any]]:
         """The names generated code sees."""
@@ -86,18 +91,24 @@ class RosMobileApi(RosRobotApi):
 
     def get_robot_pos_and_angle(self) -> tuple[np.ndarray, float]:
         """(np.array([x, y]) of the base's centre [m], its heading [rad, counterclockwise from +x])."""
-        response = self._call(self._base_pose, GetBasePose.Request(), 'the navigation node')
-        if not response.success:
-            raise RobotApiError(response.message or 'the robot\'s pose is not known yet')
-        pose = response.pose.pose
-        yaw = math.atan2(2 * pose.orientation.w * pose.orientation.z, 1 - 2 * pose.orientation.z ** 2)
-        return np.array([pose.position.x, pose.position.y]), yaw
+        deadline = time.monotonic() + self.service_timeout_s
+        while True:  # tf's first transforms come a moment after the graph starts
+            try:
+                pose = self._tf.buffer.lookup(MAP_FRAME, BASE_FRAME)
+                break
+            except TransformError as error:
+                if self.stop_requested.is_set():
+                    raise StoppedError('stopped while waiting for the robot\'s pose') from None
+                if time.monotonic() > deadline:
+                    raise RobotApiError(f'the robot\'s pose is not known: {error}') from None
+                time.sleep(0.05)
+        return np.array([pose[0, 3], pose[1, 3]]), math.atan2(pose[1, 0], pose[0, 0])
 
     # -------------------------------------------------------------------------------------------- motion
     def goto_loc(self, name: str) -> None:
         """Drive to stand in front of a location, facing it."""
         name = location_name(name)
-        self._navigate_to(Navigate.Goal(location_name=name), f'the {name}')
+        self._navigate_to(NavigateToPose.Goal(pose=pose_stamped(*layout.location(name).approach())), f'the {name}')
 
     def goto_pos(self, pos: Any, angle: Any = None) -> None:
         """Drive to a point of the floor, facing `angle` [rad] there (default: the direction from where the robot
@@ -109,7 +120,7 @@ class RosMobileApi(RosRobotApi):
             yaw = math.atan2(leg[1], leg[0]) if np.hypot(*leg) > 0.05 else yaw
         else:
             yaw = heading(angle)
-        self._navigate_to(Navigate.Goal(pose=pose_stamped(target[0], target[1], yaw)),
+        self._navigate_to(NavigateToPose.Goal(pose=pose_stamped(target[0], target[1], yaw)),
                           f'({target[0]:.2f}, {target[1]:.2f})')
 
     def follow_traj(self, pts: Any) -> None:
@@ -123,7 +134,7 @@ class RosMobileApi(RosRobotApi):
         result = self._run_goal(self._through, goal, 'the navigation node',
                                 'the navigation node refused the trajectory',
                                 timeout_s=self.motion_timeout_s * max(1.0, len(poses) / 2))
-        self._check(result, NavigateThroughPoses.Result, 'follow the trajectory')
+        self._check(result, 'follow the trajectory')
 
     def pick_obj(self, name: str) -> None:
         """Drive within reach of the object and pick it up (the arm then carries it over the base)."""
@@ -152,16 +163,17 @@ class RosMobileApi(RosRobotApi):
         if result.error_code != MobilePickPlace.Result.NONE:
             raise RobotApiError(f'could not {doing}: {result.error_msg}')
 
-    def _navigate_to(self, goal: Navigate.Goal, where: str) -> None:
+    def _navigate_to(self, goal: NavigateToPose.Goal, where: str) -> None:
         result = self._run_goal(self._navigate, goal, 'the navigation node',
                                 'the navigation node refused the goal')
-        self._check(result, Navigate.Result, f'go to {where}')
+        self._check(result, f'go to {where}')
 
-    def _check(self, result, codes, doing: str) -> None:
-        if self.stop_requested.is_set() or result.error_code == codes.CANCELLED:
+    def _check(self, result, doing: str) -> None:
+        """A navigation result as nav2 gives it: error_code 0 (NONE) when the base arrived."""
+        if self.stop_requested.is_set():
             raise StoppedError('stopped while driving')
-        if result.error_code != codes.NONE:
-            raise RobotApiError(f'could not {doing}: {result.error_msg}')
+        if result.error_code != NavigateToPose.Result.NONE:
+            raise RobotApiError(f'could not {doing}: {result.error_msg or f"error code {result.error_code}"}')
 
 
 __all__ = ['RosMobileApi']
