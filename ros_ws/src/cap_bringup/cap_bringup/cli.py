@@ -9,6 +9,9 @@
     cap approve [--reject]                           approve (or reject) the program waiting for approval
     cap snapshot --camera top --out snapshots/       save the cameras' current images as PNG
     cap urdf > ur5e_gripper.urdf                     the robot's URDF, as /robot_description carries it
+    cap up --hardware my_robot.yaml                  the graph on a real robot (a hardware profile), after a preflight
+    cap preflight my_robot.yaml                      check that the robot offers what its profile names
+    cap standin ur5e_robotiq_d435                    a simulator that plays the profile's robot (for hardware mode)
     cap demo [NAME]                                  a domain's demo (cap_bringup/demos; the table top's without NAME)
     cap bench tabletop --trials 1                    the paper's table-top benchmark (cap bench: the others)
 
@@ -464,14 +467,79 @@ def _end_console(process: Any) -> None:
         process.wait()
 
 
+def preflight(profile_path: str, wait_s: float, context=None) -> int:
+    """`cap preflight PROFILE`: one line per action, topic or frame the robot lacks (exit 1), or that it passed (0)."""
+    from cap_bringup.preflight import run_preflight
+    from cap_hardware.profile import ProfileError, load_profile
+
+    try:
+        profile = load_profile(profile_path)
+    except ProfileError as error:
+        _error(f'error: {one_line(str(error))}')
+        return EXIT_UNREACHABLE
+    if context is None:
+        session = _Session('cap_preflight')
+        node, spin_once, close = session.node, lambda t: session.executor.spin_once(timeout_sec=t), session.close
+    else:  # cap up --hardware: in the graph's context, before the graph
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        node = rclpy.create_node('cap_preflight', context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        spin_once = lambda t: executor.spin_once(timeout_sec=t)  # noqa: E731
+
+        def close() -> None:
+            executor.shutdown(timeout_sec=0)
+            node.destroy_node()
+    try:
+        return EXIT_OK if run_preflight(node, spin_once, profile, wait_s, log=_say) else EXIT_FAILED
+    finally:
+        close()
+
+
+def standin(profile_path: str, seed: int, objects: str, perturbation_seed: int, serve_gripper: bool) -> int:
+    """`cap standin PROFILE`: a simulator that plays the profile's robot, until Ctrl-C or SIGTERM."""
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    from cap_bringup.standin import StandIn
+    from cap_hardware.profile import ProfileError
+
+    signals = _signals()
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    robot = None
+    try:
+        try:
+            robot = StandIn(context, profile_path, seed, objects, perturbation_seed, serve_gripper)
+        except (ValueError, ProfileError) as error:
+            _error(f'error: {one_line(str(error))}')
+            return EXIT_UNREACHABLE
+        _say(f'stand-in for {profile_path} is up (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}): '
+             f'{", ".join(robot.nodes)}. Stop with Ctrl-C.')
+        signals.event.wait()
+        _say('shutting down')
+        return EXIT_OK
+    finally:
+        if robot is not None:
+            robot.close()
+        context.try_shutdown()
+
+
 def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, cassette: str,
        record: bool, namespace: str = '', domain: str = 'tabletop', cpu: int = 0, model_file: str = '',
-       model_threads: int = 1, console_port: int | None = None, require_approval: bool = False) -> int:
+       model_threads: int = 1, console_port: int | None = None, require_approval: bool = False,
+       hardware: str = '', preflight_wait: float = 5.0) -> int:
     """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM (and,
-    with `console_port`, the web console in a process of its own beside it).
+    with `console_port`, the web console in a process of its own beside it). With `hardware` (a profile), the
+    graph of that real robot instead, once its preflight has passed.
 
     Exits 0 when stopped by a signal, FATAL_EXIT_CODE (70) when a thread the graph depends on died (the graph no
-    longer answered), 2 when the graph cannot be built as configured (one line says what to set).
+    longer answered), 2 when the graph cannot be built as configured (one line says what to set), 1 when the
+    robot lacks what its profile names (one line per missing piece).
     """
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     import rclpy
@@ -496,11 +564,16 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
     elif backend == 'cassette':
         _say('language model: the replay cassette (its recorded commands only; `make model` installs a local model)')
     try:
+        if hardware:
+            _say(f'hardware mode: {hardware}; checking that the robot offers what the profile names ...')
+            checked = preflight(hardware, preflight_wait, context)
+            if checked != EXIT_OK:
+                return checked
         try:
             graph = Graph(context, GraphOptions(seed=seed, objects=objects, real_time=real_time,
                                                 perception=perception, llm_backend=backend, cassette=cassette,
                                                 record_cassette=record, namespace=namespace, domain=domain,
-                                                cpu=cpu, extra={'lmp_node': lmp} if lmp else {}))
+                                                cpu=cpu, extra={'lmp_node': lmp} if lmp else {}, hardware=hardware))
         except (ValueError, CapLLMError) as error:  # a configuration the user can fix: say what, in one line
             _error(f'error: {one_line(str(error))}')
             return EXIT_UNREACHABLE
@@ -631,6 +704,25 @@ def build_parser() -> argparse.ArgumentParser:
     p_up.add_argument('--console', action='store_true', help='also serve the web console (cap console) on '
                       '127.0.0.1, in a process of its own')
     p_up.add_argument('--console-port', type=int, default=8765, help='port of the web console [8765]')
+    p_up.add_argument('--hardware', default='', metavar='PROFILE', help='a real robot instead of the simulator: its '
+                      'hardware profile (a YAML file, or a shipped profile: ur5e_robotiq_d435, '
+                      'mobile_manipulator_nav2); a preflight checks the robot first')
+    p_up.add_argument('--preflight-wait', type=float, default=5.0, help='with --hardware: how long the preflight '
+                      'looks for what is missing [5 s]')
+    p_pre = commands.add_parser('preflight', help='check that a real robot offers every action, topic and frame its '
+                                'hardware profile names (exit 1 and one line per missing piece)')
+    p_pre.add_argument('profile', help='the hardware profile (a YAML file or a shipped profile\'s name)')
+    p_pre.add_argument('--wait', type=float, default=5.0, help='look for this long before calling a piece missing '
+                       '[5 s]')
+    p_standin = commands.add_parser('standin', help='a simulator that plays the robot of a hardware profile (its '
+                                    'names, units, camera; perturbed physics and sensors; no ground truth)')
+    p_standin.add_argument('profile', help='the hardware profile (a YAML file or a shipped profile\'s name)')
+    p_standin.add_argument('--seed', type=int, default=0, help='scene seed [0]')
+    p_standin.add_argument('--objects', default='', help='comma-separated objects, e.g. "red block, blue bowl"')
+    p_standin.add_argument('--perturbation-seed', type=int, default=0, help='seed of the differences from the '
+                           'graph\'s simulator [0]')
+    p_standin.add_argument('--without-gripper', action='store_true', help='do not serve the gripper action (a '
+                           'robot whose gripper controller is down)')
     p_console = commands.add_parser('console', help='serve the web console of a running graph on 127.0.0.1: '
                                     'cameras, commands, code, approval, stop')
     p_console.add_argument('--namespace', default='', help='the graph\'s namespace, e.g. robot1 [none]')
@@ -687,7 +779,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == 'up':
         return up(args.seed, args.objects, not args.fast, args.perception, args.backend, args.cassette, args.record,
                   args.namespace, args.domain, args.cpu, args.model_file, args.model_threads,
-                  args.console_port if args.console else None, args.require_approval)
+                  args.console_port if args.console else None, args.require_approval, args.hardware,
+                  args.preflight_wait)
+    if args.command == 'preflight':
+        return preflight(args.profile, args.wait)
+    if args.command == 'standin':
+        return standin(args.profile, args.seed, args.objects, args.perturbation_seed, not args.without_gripper)
     if args.command == 'console':
         return console(args.port, args.namespace)
     if args.command == 'send':

@@ -8,7 +8,7 @@ from typing import Callable, Iterable
 from geometry_msgs.msg import TransformStamped
 from tf2_msgs.msg import TFMessage
 
-from cap_ros_common.qos import TF_QOS, TF_STATIC_QOS
+from cap_ros_common.qos import TF_QOS, TF_STATIC_LISTENER_QOS, TF_STATIC_QOS
 from cap_ros_common.time import time_msg, to_seconds
 from cap_ros_common.transforms import Transform, TransformBuffer
 
@@ -49,7 +49,7 @@ class TfListener:
         self._subscriptions = [
             node.create_subscription(TFMessage, TF_TOPIC, lambda m: self._take(m, False), TF_QOS,
                                      callback_group=callback_group),
-            node.create_subscription(TFMessage, TF_STATIC_TOPIC, lambda m: self._take(m, True), TF_STATIC_QOS,
+            node.create_subscription(TFMessage, TF_STATIC_TOPIC, lambda m: self._take(m, True), TF_STATIC_LISTENER_QOS,
                                      callback_group=callback_group)]
 
     def destroy(self) -> None:

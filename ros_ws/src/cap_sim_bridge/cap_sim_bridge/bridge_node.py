@@ -68,7 +68,9 @@ from cap_sim_bridge.rest import RestWatch
 from cap_sim_bridge.config import SimBridgeConfig, cameras_to_publish, gripper_opening, gripper_position
 from cap_sim_bridge.lockstep import Lockstep
 from cap_sim_bridge.mobile_base import BASE_JOINT_NAMES
+from cap_sim_bridge.standin import LINK_TO_OPTICAL, Perturbation, standin_adjustment
 from cap_sim_bridge.urdf import BASE_LINK
+from cap_hardware.profile import load_profile
 from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES, World
 
 STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -124,28 +126,47 @@ class SimBridgeNode(Node):
         scene_name, seed = config.scene, config.seed
 
         names = [n for n in (part.strip() for part in config.objects.split(',')) if n]
+        # A hardware stand-in plays the profile's robot (cap_sim_bridge.standin): its names, units and camera.
+        self.profile = load_profile(config.profile) if config.profile else None
+        self._perturbation = Perturbation(seed=config.perturbation_seed)
+        adjust = standin_adjustment(self._perturbation, config.standin_camera,
+                                    self.profile.calibration.camera_mount) if self.profile else None
         # Names, not specs: the world reads them once its scene (and the object kinds the scene brings) is loaded.
-        self.world = World(scene_name, seed, names or None)
-        self._cameras = cameras_to_publish(config.cameras, self.world.scene.camera_names, self.world.camera_names)
+        self.world = World(scene_name, seed, names or None, adjust_model=adjust)
+        if self.profile is None:
+            self._cameras = cameras_to_publish(config.cameras, self.world.scene.camera_names, self.world.camera_names)
+            topics = {camera: {kind: camera_topic(camera, kind) for kind in ('color', 'depth', 'camera_info')}
+                      for camera in self._cameras}
+        else:
+            self._cameras = [config.standin_camera]
+            camera = self.profile.camera
+            topics = {config.standin_camera: {'color': camera.color, 'depth': camera.depth,
+                                              'camera_info': camera.camera_info}}
+        # Stamps: simulated time, or for a stand-in the wall clock (a real robot's drivers stamp with theirs).
+        self._stamp_offset = time.time() - self.world.time if self.profile else 0.0
+        self._frames_sent = 0
 
-        self._clock_pub = self.create_publisher(Clock, GraphNames.CLOCK_TOPIC, STATE_QOS)
+        self._clock_pub = self.create_publisher(Clock, GraphNames.CLOCK_TOPIC, STATE_QOS) if not self.profile \
+            else None
         self._joint_pub = self.create_publisher(JointState, config.joint_states_topic, STATE_QOS)
-        self._objects_pub = self.create_publisher(ObjectArray, GraphNames.SIM_OBJECTS_TOPIC, LATCHED_QOS)
+        self._objects_pub = self.create_publisher(ObjectArray, GraphNames.SIM_OBJECTS_TOPIC, LATCHED_QOS) \
+            if not self.profile else None
         self._camera_pubs = {
             camera: {
-                'color': self.create_publisher(Image, camera_topic(camera, 'color'), IMAGE_QOS),
-                'depth': self.create_publisher(Image, camera_topic(camera, 'depth'), IMAGE_QOS),
-                'camera_info': self.create_publisher(CameraInfo, camera_topic(camera, 'camera_info'), IMAGE_QOS),
-            } for camera in self._cameras}
+                'color': self.create_publisher(Image, names['color'], IMAGE_QOS),
+                'depth': self.create_publisher(Image, names['depth'], IMAGE_QOS),
+                'camera_info': self.create_publisher(CameraInfo, names['camera_info'], IMAGE_QOS),
+            } for camera, names in topics.items()}
         self._tf = TfBroadcaster(self)
         self._tf.send_static(self._static_transforms())
         # A camera the base carries: each of its frames is sent with odom -> base_link at the frame's stamp.
         self._moving_cameras = {camera for camera in self._cameras if self.world.camera_moves(camera)}
 
         callbacks = ReentrantCallbackGroup()
-        self.create_service(ResetScene, GraphNames.SIM_RESET_SERVICE, self._on_reset, callback_group=callbacks)
+        if not self.profile:  # a real robot has no reset of its world
+            self.create_service(ResetScene, GraphNames.SIM_RESET_SERVICE, self._on_reset, callback_group=callbacks)
         self._ink_pub = None
-        if self.world.ink_canvas is not None:
+        if self.world.ink_canvas is not None and not self.profile:
             self._ink_pub = self.create_publisher(Image, GraphNames.SIM_INK_TOPIC, LATCHED_QOS)
             self.create_service(GetInk, GraphNames.SIM_GET_INK_SERVICE, self._on_get_ink, callback_group=callbacks)
         self._ink_rate = config.ink_rate
@@ -163,19 +184,24 @@ class SimBridgeNode(Node):
                 lambda handle: self._while_running(self._execute_trajectory, handle, self._base_target()),
                 goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
                 result_timeout=RESULT_TIMEOUT_S, callback_group=callbacks)
-        self._gripper_server = ActionServer(
-            self, GripperCommand, config.gripper_action,
-            lambda handle: self._while_running(self._execute_gripper, handle),
-            goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
-            result_timeout=RESULT_TIMEOUT_S, callback_group=callbacks)
+        self._gripper_server = None
+        if config.serve_gripper or not self.profile:
+            self._gripper_server = ActionServer(
+                self, GripperCommand, config.gripper_action,
+                lambda handle: self._while_running(self._execute_gripper, handle),
+                goal_callback=lambda _: GoalResponse.ACCEPT, cancel_callback=lambda _: CancelResponse.ACCEPT,
+                result_timeout=RESULT_TIMEOUT_S, callback_group=callbacks)
 
         # Controllers: lockstep stepping of a plant, pushes on the tool.
         self._scene_joints = self.world.scene_joint_names()
         self.lockstep = Lockstep(self.world, self._real_time_factor, config.lockstep_timeout)
         self._step_node: Node = self
-        self._step_service = self.create_service(ControlStep, GraphNames.SIM_CONTROL_STEP_SERVICE,
-                                                 self._on_control_step, callback_group=callbacks)
-        self.create_service(PushTool, GraphNames.SIM_PUSH_TOOL_SERVICE, self._on_push_tool, callback_group=callbacks)
+        self._step_service = None
+        if not self.profile:
+            self._step_service = self.create_service(ControlStep, GraphNames.SIM_CONTROL_STEP_SERVICE,
+                                                     self._on_control_step, callback_group=callbacks)
+            self.create_service(PushTool, GraphNames.SIM_PUSH_TOOL_SERVICE, self._on_push_tool,
+                                callback_group=callbacks)
         self._last_lockstep_state_wall = -math.inf
 
         self._publish_scene()
@@ -195,7 +221,8 @@ class SimBridgeNode(Node):
         self._woken.set()
         self._physics.join(timeout=10.0)
         self._trajectory_server.destroy()
-        self._gripper_server.destroy()
+        if self._gripper_server is not None:
+            self._gripper_server.destroy()
         if self._base_server is not None:
             self._base_server.destroy()
         super().destroy_node()
@@ -239,13 +266,14 @@ class SimBridgeNode(Node):
                         wall - last_objects_wall >= 1.0 / MAX_WALL_OBJECTS_RATE else None
                 base_sent = False
                 if joints is not None:
-                    self._clock_pub.publish(Clock(clock=time_msg(now)))
+                    if self._clock_pub is not None:
+                        self._clock_pub.publish(Clock(clock=time_msg(now)))
                     self._joint_pub.publish(joints)
                     if base is not None:
                         self._tf.send([base])
                         base_sent = True
                     last_state_wall = wall
-                if objects is not None:
+                if objects is not None and self._objects_pub is not None:
                     self._objects_pub.publish(ObjectArray(header=conv.header(now),
                                                           objects=[conv.object_state_msg(s) for s in objects]))
                     next_objects = max(next_objects + 1.0 / objects_rate, now)
@@ -293,6 +321,10 @@ class SimBridgeNode(Node):
             identity = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
             transforms += [Transform(conv.WORLD_FRAME, conv.MAP_FRAME, 0.0, *identity),
                            Transform(conv.MAP_FRAME, conv.ODOM_FRAME, 0.0, *identity)]
+        if self.profile is not None:  # a camera driver's part of the chain; the mount is the calibration's
+            mount = self.profile.calibration.camera_mount
+            return transforms + [Transform(mount.child, self.profile.camera.frame, 0.0,
+                                           *translation_rotation(LINK_TO_OPTICAL))]
         for camera in self._cameras:
             mount = self.world.camera_mount(camera)
             if mount is not None:
@@ -303,18 +335,22 @@ class SimBridgeNode(Node):
     def _base_transform(self, now: float) -> Transform:
         """odom -> base_link now: the base joints' x, y and yaw (call with world.lock held)."""
         x, y, yaw = self.world.base_pose()
-        return Transform(conv.ODOM_FRAME, BASE_LINK, now, (float(x), float(y), 0.0),
+        return Transform(conv.ODOM_FRAME, BASE_LINK, now + self._stamp_offset, (float(x), float(y), 0.0),
                          (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)))
 
     def _joint_states(self, now: float) -> JointState:
         """The arm's, the fingers' and the scene's own joints (call with world.lock held)."""
         world, scene = self.world, self._scene_joints
         scene_positions, scene_velocities = world.joint_state(scene)
-        return conv.joint_state_msg(
-            now, ARM_JOINT_NAMES + GRIPPER_JOINT_NAMES + tuple(scene),
-            np.concatenate([world.joint_positions(), world.finger_positions(), scene_positions]),
-            np.concatenate([world.joint_velocities(), world.finger_velocities(), scene_velocities]),
-            np.concatenate([world.joint_efforts(), np.zeros(2), world.joint_actuator_forces(scene)]))
+        names = ARM_JOINT_NAMES + GRIPPER_JOINT_NAMES + tuple(scene)
+        positions = np.concatenate([world.joint_positions(), world.finger_positions(), scene_positions])
+        velocities = np.concatenate([world.joint_velocities(), world.finger_velocities(), scene_velocities])
+        efforts = np.concatenate([world.joint_efforts(), np.zeros(2), world.joint_actuator_forces(scene)])
+        if self.profile is not None and self.profile.gripper.joint:  # the gripper's own joint, in its units
+            names += (self.profile.gripper.joint,)
+            positions = np.append(positions, gripper_position(self.config, float(np.sum(world.finger_positions()))))
+            velocities, efforts = np.append(velocities, 0.0), np.append(efforts, 0.0)
+        return conv.joint_state_msg(now + self._stamp_offset, names, positions, velocities, efforts)
 
     # ------------------------------------------------------------------------------------------- controllers
     def bind_quick(self, node: Node) -> None:
@@ -390,14 +426,23 @@ class SimBridgeNode(Node):
         for camera, with_depth in watched:
             publishers = self._camera_pubs[camera]
             rgb, depth = self.world.render(camera, width, height, with_depth=with_depth)
-            frames.append((publishers, conv.color_image_msg(now, camera, rgb),
-                           conv.depth_image_msg(now, camera, depth) if depth is not None else None,
-                           conv.camera_info_msg(now, camera, self.world.camera_intrinsics(camera, width, height))))
+            messages = [conv.color_image_msg(now, camera, rgb), None,
+                        conv.camera_info_msg(now, camera, self.world.camera_intrinsics(camera, width, height))]
+            if depth is not None and self.profile is None:
+                messages[1] = conv.depth_image_msg(now, camera, depth)
+            elif depth is not None:  # a stand-in's camera: noisy whole millimetres, in its driver's frame
+                self._frames_sent += 1
+                messages[1] = conv.depth_mm_image_msg(now, camera, self._perturbation.noisy_depth(
+                    depth, self._frames_sent))
+            if self.profile is not None:
+                for message in messages:
+                    if message is not None:
+                        message.header.frame_id = self.profile.camera.frame
+            frames.append((publishers, *messages))
         return frames
 
-    @staticmethod
-    def _send_frames(frames: list[tuple[Any, ...]], now: float) -> None:
-        stamp = time_msg(now)
+    def _send_frames(self, frames: list[tuple[Any, ...]], now: float) -> None:
+        stamp = time_msg(now + self._stamp_offset)
         for publishers, color, depth, info in frames:
             for kind, message in (('color', color), ('depth', depth), ('camera_info', info)):
                 if message is not None:
@@ -410,8 +455,9 @@ class SimBridgeNode(Node):
             now = self.world.time
             states = self.world.object_states()
             base = self._base_transform(now) if self.world.base is not None else None
-        self._objects_pub.publish(ObjectArray(header=conv.header(now),
-                                              objects=[conv.object_state_msg(s) for s in states]))
+        if self._objects_pub is not None:
+            self._objects_pub.publish(ObjectArray(header=conv.header(now),
+                                                  objects=[conv.object_state_msg(s) for s in states]))
         if base is not None:
             self._tf.send([base])
 
@@ -428,21 +474,26 @@ class SimBridgeNode(Node):
         return response
 
     # --------------------------------------------------------------------------------------------- reset
+    def reset_world(self, seed: int, specs=None) -> list:
+        """Reset the world (objects: specs, or the seed's episode) and tell the graph; the states settled. A stand-in
+        is reset this way by the test that plays the world around the robot (it offers no reset service)."""
+        self.lockstep.release()  # a reset ends a controller's hold on the world
+        states = self.world.reset(seed, specs or None)
+        self._scene_reset.set()
+        self._woken.set()
+        self._publish_scene()
+        return states
+
     def _on_reset(self, request: ResetScene.Request, response: ResetScene.Response) -> ResetScene.Response:
         try:
             if request.scene and request.scene != self.world.scene_name:
                 raise ValueError(f'unknown scene {request.scene!r}; this bridge simulates '
                                  f'"{self.world.scene_name}"')
-            specs = [conv.object_spec(o) for o in request.objects]
-            self.lockstep.release()  # a reset ends a controller's hold on the world
-            states = self.world.reset(request.seed, specs or None)
-            self._scene_reset.set()
-            self._woken.set()
+            states = self.reset_world(request.seed, [conv.object_spec(o) for o in request.objects])
         except ValueError as error:
             response.success = False
             response.message = str(error)
             return response
-        self._publish_scene()
         response.success = True
         response.message = f'scene "{self.world.scene_name}" seed {request.seed}: ' + \
             ', '.join(s.name for s in states)
@@ -534,10 +585,10 @@ class SimBridgeNode(Node):
         result.error_string = message
         return result
 
-    @staticmethod
-    def _trajectory_feedback(joint_names, now, elapsed, desired, desired_velocities, positions, velocities):
+    def _trajectory_feedback(self, joint_names, now, elapsed, desired, desired_velocities, positions, velocities):
         duration = duration_msg(elapsed)
-        feedback = FollowJointTrajectory.Feedback(header=conv.header(now), joint_names=list(joint_names))
+        feedback = FollowJointTrajectory.Feedback(header=conv.header(now + self._stamp_offset),
+                                                  joint_names=list(joint_names))
         feedback.desired = JointTrajectoryPoint(positions=desired.tolist(), velocities=desired_velocities.tolist(),
                                                 time_from_start=duration)
         feedback.actual = JointTrajectoryPoint(positions=positions.tolist(), velocities=velocities.tolist(),

@@ -59,6 +59,17 @@ class SimBridgeConfig:
     gripper_closed_position: float = parameter(0.0, 'The GripperCommand position of a fully closed gripper (a '
                                                'Robotiq\'s knuckle: 0.8).')
     joint_states_topic: str = parameter(GraphNames.JOINT_STATES_TOPIC, 'Where the joint states go.')
+    # A hardware stand-in (cap_sim_bridge.standin): the simulator plays a real robot for a graph in hardware mode.
+    profile: str = parameter('', 'A hardware profile to play (a file or a shipped profile\'s name): serve only what '
+                                 'it names, under its names and units, stamped with the wall clock, with no /clock, '
+                                 'no ground truth and no scene services, and with the stand-in\'s perturbations. '
+                                 'Empty: the simulator\'s own graph.')
+    standin_camera: str = parameter('top', 'With a profile: the scene\'s camera that plays the profile\'s camera, '
+                                           'mounted where its calibration says.')
+    perturbation_seed: int = parameter(0, 'With a profile: the seed of the stand-in\'s differences from the '
+                                          'graph\'s simulator (masses, friction, the camera\'s mount, depth noise).')
+    serve_gripper: bool = parameter(True, 'With a profile: serve the gripper action (false: a robot whose gripper '
+                                          'controller is not running, for the preflight).')
     ink_rate: float = parameter(5.0, 'In a scene with a whiteboard: most ink images a second of simulated time, '
                                      'sent only when the ink changed [Hz].')
     lockstep_timeout: float = parameter(5.0, 'A controller stepping a plant (ControlStep) that sends no request for '

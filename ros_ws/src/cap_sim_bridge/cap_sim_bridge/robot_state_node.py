@@ -36,6 +36,8 @@ class RobotStateConfig:
     scene: str = parameter(DEFAULT_SCENE, 'Simulator scene whose robot model is described (when robot_description '
                                           'is empty).')
     robot_description: str = parameter('', 'The robot\'s URDF; empty: written from the scene\'s model.')
+    joint_states_topic: str = parameter(GraphNames.JOINT_STATES_TOPIC, 'sensor_msgs/JointState topic of the '
+                                        'robot\'s joints.')
 
 
 class RobotStateNode(Node):
@@ -50,7 +52,7 @@ class RobotStateNode(Node):
         self._description.publish(String(data=self.urdf))
         self.tf = TfBroadcaster(self)
         self.tf.send_static(self.state.fixed_transforms())
-        self.create_subscription(JointState, GraphNames.JOINT_STATES_TOPIC, self._on_joint_states, JOINT_STATES_QOS)
+        self.create_subscription(JointState, config.joint_states_topic, self._on_joint_states, JOINT_STATES_QOS)
 
     def _on_joint_states(self, message: JointState) -> None:
         if len(message.position) != len(message.name):

@@ -72,6 +72,14 @@ def depth_image_msg(seconds: float, camera: str, depth: np.ndarray) -> Image:
                  is_bigendian=0, step=width * 4, data=depth.tobytes())
 
 
+def depth_mm_image_msg(seconds: float, camera: str, millimetres: np.ndarray) -> Image:
+    """16UC1 depth in millimetres, 0 where nothing was measured: what a RealSense's driver sends."""
+    height, width = millimetres.shape
+    data = np.ascontiguousarray(millimetres, dtype='<u2')
+    return Image(header=header(seconds, optical_frame_id(camera)), height=height, width=width, encoding='16UC1',
+                 is_bigendian=0, step=width * 2, data=data.tobytes())
+
+
 def ink_image_msg(seconds: float, ink: np.ndarray) -> Image:
     """A whiteboard's ink image: mono8, 255 = ink, row 0 = the board's top edge (GraphNames.SIM_INK_TOPIC)."""
     height, width = ink.shape

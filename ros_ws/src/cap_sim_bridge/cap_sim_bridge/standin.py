@@ -13,13 +13,17 @@ Plain Python, NumPy and MuJoCo, no ROS.
 from __future__ import annotations
 
 import dataclasses
-from typing import Iterable
+from typing import Callable, Iterable
 
 import mujoco
 import numpy as np
+from cap_hardware.profile import Mount
+from cap_ros_common.transforms import TransformBuffer, pose_matrix
 from scipy.spatial.transform import Rotation
 
 from cap_sim_bridge.camera import MUJOCO_FROM_OPTICAL
+from cap_sim_bridge.robot_state import RobotState
+from cap_sim_bridge.urdf import robot_urdf
 
 # The camera driver's part of the chain: camera_link (x forward, z up) -> the colour optical frame (z forward, y
 # down), 15 mm to the left of camera_link as a RealSense D435's colour sensor sits: what its driver publishes.
@@ -81,4 +85,30 @@ def place_camera(model: mujoco.MjModel, camera: str, optical_in_body: np.ndarray
     model.cam_quat[index] = [w, x, y, z]
 
 
-__all__ = ['LINK_TO_OPTICAL', 'Perturbation', 'place_camera']
+def body_frame(model: mujoco.MjModel, body: int) -> str:
+    """The tf frame of a body: its URDF link's name, 'world' for the world body."""
+    return 'world' if body == 0 else mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body)
+
+
+def standin_adjustment(perturbation: Perturbation, camera: str, mount: Mount) -> Callable[[mujoco.MjModel], None]:
+    """What a stand-in does to every model it compiles: the objects perturbed, and the named MuJoCo camera put where
+    the calibration's `mount` says camera_link is (moved by the perturbation's camera error), looking as a camera
+    driver's optical frame does from there."""
+    def adjust(model: mujoco.MjModel) -> None:
+        # The objects are the bodies on free joints.
+        perturbation.perturb_objects(model, [int(model.jnt_bodyid[joint]) for joint in range(model.njnt)
+                                             if model.jnt_type[joint] == mujoco.mjtJoint.mjJNT_FREE])
+        # The camera's body in the mount's parent frame, through the robot's fixed tree at zero joints.
+        state = RobotState(robot_urdf(model))
+        tree = TransformBuffer()
+        tree.add(state.fixed_transforms(), static=True)
+        tree.add(state.moving_transforms(state.moving_joint_names, [0.0] * len(state.moving_joint_names), 0.0),
+                 static=True)
+        body = body_frame(model, int(model.cam_bodyid[model.camera(camera).id]))
+        body_in_parent = tree.lookup(mount.parent, body) if body != mount.parent else np.eye(4)
+        optical = pose_matrix(mount.translation, mount.rotation) @ perturbation.camera_error() @ LINK_TO_OPTICAL
+        place_camera(model, camera, np.linalg.inv(body_in_parent) @ optical)
+    return adjust
+
+
+__all__ = ['LINK_TO_OPTICAL', 'Perturbation', 'body_frame', 'place_camera', 'standin_adjustment']
