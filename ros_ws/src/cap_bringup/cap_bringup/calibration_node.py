@@ -8,12 +8,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from cap_bringup.preflight import calibration_transforms
 from cap_hardware.profile import load_profile
+from cap_ros_common.nodes import spin_node
 from cap_ros_common.parameters import declare_config, parameter
 from cap_ros_common.tf import TfBroadcaster
 
@@ -38,20 +37,7 @@ class CalibrationNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    executor = SingleThreadedExecutor()
-    node = None
-    try:
-        node = CalibrationNode()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        executor.shutdown()
-        rclpy.try_shutdown()
+    spin_node(CalibrationNode, args)
 
 
 if __name__ == '__main__':

@@ -13,8 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from visualization_msgs.msg import MarkerArray
 
@@ -22,6 +20,7 @@ from cap_bringup.markers import Bounds, scene_markers
 from cap_interfaces.msg import GraphNames, StatusEvent
 from cap_interfaces.srv import GetObjectNames, GetObjectState
 from cap_lmp_ros.lmp_node import EVENT_QOS
+from cap_ros_common.nodes import spin_node
 from cap_ros_common.parameters import declare_config, parameter
 from cap_ros_common.qos import LATCHED_QOS
 from cap_tabletop.workspace import TABLE_X_RANGE, TABLE_Y_RANGE, TABLE_Z
@@ -100,15 +99,4 @@ class VisualizationNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """The `visualization_node` entry point."""
-    rclpy.init(args=args)
-    node = VisualizationNode()
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(VisualizationNode, args)

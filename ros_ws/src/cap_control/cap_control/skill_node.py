@@ -25,13 +25,11 @@ import time
 from concurrent.futures import Future, InvalidStateError
 from typing import Any, Callable
 
-import rclpy
 from cap_ros_common.time import to_seconds
 from rclpy.action import CancelResponse, GoalResponse
 from cap_ros_common.actions import ActionClient
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Empty
@@ -43,6 +41,7 @@ from cap_control.ports import (
 from cap_control.robot_interfaces import ArmInterfaces, StateInterfaces
 from cap_control.trajectory import JointTrajectory
 from cap_interfaces.msg import GraphNames
+from cap_ros_common.nodes import spin_node as spin
 from cap_ros_common.parameters import declare_config
 from control_msgs.action import FollowJointTrajectory, GripperCommand
 from cap_interfaces.srv import GetObjectNames, GetObjectState
@@ -427,20 +426,8 @@ def _mark_canceling(goal_handle, timeout_s: float = 1.0) -> bool:
 
 
 def spin_node(node_class: type, args: list[str] | None = None) -> None:
-    """main() of a skill node: build it and spin it on a multi-threaded executor (4 threads) until shut down."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = node_class()
-        executor = MultiThreadedExecutor(num_threads=4)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    """main() of a skill node: spun on a multi-threaded executor (4 threads), its goals block while they run."""
+    spin(node_class, args, threads=4)
 
 
 __all__ = ['ActionGoal', 'ArmNode', 'ArmPort', 'GoalNode', 'GripperPort', 'PerceptionPort', 'READY_CHECK_PERIOD',

@@ -12,14 +12,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from cap_interfaces.msg import GraphNames
+from cap_ros_common.nodes import spin_node
 from cap_ros_common.parameters import declare_config, parameter
 from cap_ros_common.qos import LATCHED_QOS
 from cap_ros_common.tf import TfBroadcaster
@@ -61,20 +60,7 @@ class RobotStateNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    executor = SingleThreadedExecutor()
-    node = None
-    try:
-        node = RobotStateNode()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        executor.shutdown()
-        rclpy.try_shutdown()
+    spin_node(RobotStateNode, args)
 
 
 if __name__ == '__main__':
