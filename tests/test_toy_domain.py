@@ -15,6 +15,9 @@ import pytest
 import rclpy
 from std_msgs.msg import String
 
+from cap_bringup import cli
+from cap_bringup.cli import BENCHMARK_GROUP
+from cap_bringup.demos import DEMOS
 from cap_bringup.graph import Graph, GraphOptions
 from cap_interfaces.action import ExecuteCommand
 from cap_interfaces.msg import GraphNames
@@ -70,6 +73,15 @@ class BellAndEyes(RosTabletopApi):
 # Step 5, the domain: the toy LMP's engine, the API, the scene by its name, and the cassette.
 DOMAIN = Domain(name=NAME, build_engine=toy_domain.build_engine, robot_functions=('get_obj_names', 'ring_bell'),
                 robot_api=BellAndEyes, scene=NAME, cassette=Path(%r))
+
+
+# Step 7, a demo and a benchmark (each a main(argv) -> exit code; a real one runs the graph).
+def demo(argv):
+    return 0
+
+
+def bench(argv):
+    return 0
 '''
 
 
@@ -82,7 +94,9 @@ def bell_domain(tmp_path, install_plugin):
     # Step 6, the entry points, under the domain's one name.
     install_plugin({'bell_domain': PLUGIN % str(cassette.path)},
                    {scenes.ENTRY_POINT_GROUP: {'bell': 'bell_domain:SCENE'},
-                    registry.ENTRY_POINT_GROUP: {'bell': 'bell_domain:DOMAIN'}}, name='bell-domain')
+                    registry.ENTRY_POINT_GROUP: {'bell': 'bell_domain:DOMAIN'},
+                    DEMOS.group: {'bell': 'bell_domain:demo'}, BENCHMARK_GROUP: {'bell': 'bell_domain:bench'}},
+                   name='bell-domain')
     return 'bell'
 
 
@@ -110,6 +124,8 @@ def test_a_toy_domain_registered_from_a_test_runs_through_the_whole_graph(ros_co
     rings = []
     user.create_subscription(String, toy_domain.BELL_TOPIC, lambda message: rings.append(message.data), 10)
     try:
+        # The cap command finds the domain's demo and benchmark by the domain's name.
+        assert cli.main(['demo', 'bell']) == 0 and cli.main(['bench', 'bell']) == 0
         assert graph.world.scene.name == 'bell'
         assert sorted(state.name for state in graph.world.object_states()) == sorted(OBJECTS)
         execute = rclpy.action.ActionClient(user, ExecuteCommand, GraphNames.EXECUTE_ACTION)

@@ -32,7 +32,6 @@ control characters escaped (cap_lmp.safe_text.terminal_text).
 from __future__ import annotations
 
 import argparse
-import importlib.metadata
 import os
 import pathlib
 import signal
@@ -598,7 +597,7 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
 
 
 BENCH_USAGE = """usage: cap bench NAME [options]   (options: cap bench NAME --help)
-       NAME: tabletop | devset | whiteboard | controllers | mobile | codegen | humaneval | reasoning
+       NAME: {names}
 
 The paper's simulated table-top benchmark through the cap-ros graph, e.g.
     cap bench tabletop --trials 1                   one episode of every row with the reference programs
@@ -651,26 +650,33 @@ def demo(argv: Sequence[str]) -> int:
     return int(run(options))
 
 
-def benchmarks() -> dict[str, Any]:
-    """The benchmarks packages above this one offer, by name (entry points of the group `cap_ros.benchmarks`).
+def benchmarks():
+    """The benchmarks packages above this one offer (entry points of the group `cap_ros.benchmarks`, value: a
+    main(argv)). A benchmark builds on the graph, so its package sits above bringup and registers itself; bringup
+    never names it."""
+    from cap_ros_common.plugins import PluginGroup
 
-    A benchmark builds on the graph, so its package sits above bringup and registers itself; bringup never names it.
-    """
-    return {entry.name: entry for entry in importlib.metadata.entry_points(group=BENCHMARK_GROUP)}
+    return PluginGroup(BENCHMARK_GROUP, 'benchmark', callable)
 
 
 def bench(argv: Sequence[str]) -> int:
     """`cap bench NAME ...`: runs the registered benchmark NAME; anything else prints the usage."""
     offered = benchmarks()
-    if argv[:1] and argv[0] in offered:
-        return int(offered[argv[0]].load()(list(argv[1:])))
+    names = offered.names()
+    usage = BENCH_USAGE.format(names=' | '.join(names) or 'none installed')
+    if argv[:1] and argv[0] in names:
+        try:
+            main = offered.get(argv[0])
+        except ValueError as error:  # offered twice, or broken: one line says which
+            _error(f'cap bench: error: {one_line(str(error))}')
+            return EXIT_UNREACHABLE
+        return int(main(list(argv[1:])))
     if list(argv) in (['-h'], ['--help'], ['help']):
-        print(BENCH_USAGE, end='')
+        print(usage, end='')
         return EXIT_OK
-    print(BENCH_USAGE, end='', file=sys.stderr)
+    print(usage, end='', file=sys.stderr)
     problem = f'unknown benchmark {argv[0]!r}' if argv else 'choose a benchmark'
-    names = ', '.join(sorted(offered)) or 'none installed'
-    _error(f'cap bench: error: {problem} (installed: {names})')
+    _error(f'cap bench: error: {problem} (installed: {", ".join(names) or "none"})')
     return EXIT_UNREACHABLE
 
 
