@@ -151,12 +151,10 @@ class SimBridgeNode(Node):
         self._joint_pub = self.create_publisher(JointState, config.joint_states_topic, STATE_QOS)
         self._objects_pub = self.create_publisher(ObjectArray, GraphNames.SIM_OBJECTS_TOPIC, LATCHED_QOS) \
             if not self.profile else None
-        self._camera_pubs = {
-            camera: {
-                'color': self.create_publisher(Image, names['color'], IMAGE_QOS),
-                'depth': self.create_publisher(Image, names['depth'], IMAGE_QOS),
-                'camera_info': self.create_publisher(CameraInfo, names['camera_info'], IMAGE_QOS),
-            } for camera, names in topics.items()}
+        self._camera_pubs = {camera: {kind: self.create_publisher(CameraInfo if kind == 'camera_info' else Image,
+                                                                  topic, IMAGE_QOS)
+                                      for kind, topic in kinds.items()}
+                             for camera, kinds in topics.items()}
         self._tf = TfBroadcaster(self)
         self._tf.send_static(self._static_transforms())
         # A camera the base carries: each of its frames is sent with odom -> base_link at the frame's stamp.
