@@ -290,11 +290,15 @@ class Graph:
     If a thread the graph depends on dies (an executor's, lmp_node's worker), `failed` is set and `failure` says
     which and why (also printed on stderr, one line): the graph no longer answers and its owner should end (`cap up`
     exits with thread_watch.FATAL_EXIT_CODE).
+
+    `node_arguments` ({node name: {argument: value}}) are passed to those nodes' constructors besides their
+    parameters: what tests put in that no parameter offers (lmp_node's sandbox_command).
     """
 
     CLOSE_TIMEOUT_S = 5.0  # per stage: spinning threads, callbacks in flight
 
-    def __init__(self, context, options: GraphOptions, num_threads: int = 8) -> None:
+    def __init__(self, context, options: GraphOptions, num_threads: int = 8,
+                 node_arguments: dict[str, dict[str, Any]] | None = None) -> None:
         if options.cpu is not None:
             pin_to_one_cpu(options.cpu)  # before the graph's threads start, so that they inherit it
         self.context = context
@@ -321,8 +325,9 @@ class Graph:
                           **overrides.get(spec.name, {})}
                 # lmp_node's worker thread reports its death to the graph's watch, like the executors' threads.
                 watched = {'thread_watch': self._watch} if spec is LMP_NODE else {}
+                given = (node_arguments or {}).get(spec.name, {})  # a test's own constructor arguments
                 node = node_class(spec)(context=context, parameter_overrides=[
-                    Parameter(name, value=value) for name, value in values.items()], **placed, **watched)
+                    Parameter(name, value=value) for name, value in values.items()], **placed, **watched, **given)
                 self.nodes[spec.name] = node
                 if is_quick(spec.name, values):
                     quick.add_node(node)

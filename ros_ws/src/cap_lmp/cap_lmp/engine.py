@@ -29,8 +29,11 @@ Limits of one command besides the sandbox's (sandbox.py):
   if the session still holds more than half the limit afterwards, the session is reset, and the result says so.
 
 Approval (approval.py): with `approval` set, the checked code is first run in plan-only mode (the
-`plan_functions` only record their calls) and the gate is asked with the code and that plan; the program runs only
-once it returns. A rejection, or no approval in time, ends the command as refused; nothing of it ran.
+`plan_functions` only record their calls, on a copy of the session) and the gate is asked with the code (the nested
+LMPs' code the plan asked for included) and that plan; the program runs only once it returns. A rejection, or no
+approval in time, ends the command as refused; nothing of it ran. The approved run executes the code it was
+approved with: a nested LMP asked with a query the plan did not ask stops it (reason 'unapproved', refused), with
+no new model request.
 
 Threads: `run` executes on the calling thread and holds a lock (one command at a time); `cancel()` may be called
 from any thread and stops the running program at its next checkpoint with ExecutionStopped(reason='cancelled').
@@ -48,7 +51,7 @@ import traceback
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping
 
-from cap_lmp.approval import ApprovalGate, PlannedCall, recorders
+from cap_lmp.approval import ApprovalGate, PlannedCall, recorders, session_copy
 from cap_lmp.errors import (CapLLMError, CodeRejected, ExecutionStopped, GenerationError, NotApproved, UndefinedName,
                             UnusableAnswer)
 from cap_lmp.functions import top_level_functions, undefined_calls
@@ -57,7 +60,7 @@ from cap_lmp.outcome import Outcome, outcome_of
 from cap_lmp.provided_imports import drop_provided_imports
 from cap_lmp.unbound import bound_names, unbound_names
 from cap_lmp.sandbox import SANDBOX_FILE_PREFIX, CompiledProgram, Sandbox, SandboxLimits, bounded_exception_text
-from cap_lmp.wire import MAX_PROGRAM_CHARS
+from cap_lmp.wire import MAX_CODE_CHARS, MAX_PROGRAM_CHARS
 
 _log = logging.getLogger(__name__)
 
@@ -123,7 +126,7 @@ class CommandResult:
     error_type: str = ''
     error_line: int | None = None
     error_source: str | None = None
-    stop_reason: str = ''  # for ExecutionStopped: 'timeout', 'cancelled', 'memory', 'recursion', 'model_timeout'
+    stop_reason: str = ''  # of ExecutionStopped: 'timeout', 'cancelled', 'memory', 'recursion', 'unapproved', ...
     model_calls: int = 0
     prompt_tokens: int = 0
     completion_tokens: int = 0
@@ -238,6 +241,7 @@ class Engine:
         self.plan_functions = tuple(name for name in plan_functions if name in self.api)
         self.approval: ApprovalGate | None = None  # set: every command waits for it after a plan-only run
         self._kept_answers: dict[tuple[Any, ...], PreparedCode] | None = None  # nested LMPs' code of a planned command
+        self._approved_run = False  # the approved program runs: no new code may be asked for
         self._listeners: list[Callable[[EngineEvent], None]] = []
         self._cancel = threading.Event()
         self._run_lock = threading.Lock()
@@ -508,6 +512,9 @@ class Engine:
         key = (lmp, query, context, tuple(sorted(variables)))
         kept = self._kept_answers
         prepared = kept.get(key) if kept is not None else None  # planned: the run executes what was approved
+        if prepared is None and self._approved_run:
+            self._stop_unapproved(f'the program asked {lmp} for code with a query the approved plan did not ask '
+                                  f'({query[:200]!r}); new code nobody reviewed was not asked for')
         if prepared is None:
             watchdog = self.sandbox.watchdog
             if watchdog is not None:  # called from a running program: our own host work needs no tracing
@@ -552,9 +559,11 @@ class Engine:
                 if self.approval is not None:
                     planning = True
                     plan = self._plan(config, prepared, command, context)
+                    shown = self._code_for_approval(result.code)
                     planning = False
-                    self.approval(result.code, plan)
+                    self.approval(shown, plan)
                     self._check_cancel()
+                    self._approved_run = True
                 self._emit(EXECUTING, name, code=result.code)
                 execute_started = time.monotonic()
                 self.scope.update(self._fixed_names)
@@ -569,6 +578,7 @@ class Engine:
                 del error  # its traceback holds the program's frames and their memory
             finally:
                 self._kept_answers = None
+                self._approved_run = False
             if result.stop_reason == 'memory' or result.error_type == 'MemoryError':
                 result.message += self._recover_memory(kept_scope, kept_functions)
             del kept_scope, kept_functions
@@ -590,11 +600,12 @@ class Engine:
 
     def _plan(self, config: LMPConfig, prepared: PreparedCode, query: str, context: str) -> list[PlannedCall]:
         """Run the program in plan-only mode (see approval.py) and return the calls it would make of the
-        plan_functions. The session is left as it was: the run works on copies of its scope, histories and
-        functions (nested LMPs included), and a generated function defined for it sees the recorders too."""
+        plan_functions. The session is left as it was: the run works on copies of its scope (every value copied,
+        approval.session_copy), histories and functions (nested LMPs included), and a function defined for it, or
+        by earlier commands, sees the recorders too."""
         plan: list[PlannedCall] = []
         kept = self.scope, self.histories, self.functions
-        scope = dict(self.scope)
+        scope = session_copy(self.scope, self._fixed_names.values())
         scope.update(self._fixed_names)
         scope.update(recorders(self.plan_functions, plan))
         self.scope = scope
@@ -606,6 +617,24 @@ class Engine:
         finally:
             self.scope, self.histories, self.functions = kept
         return plan
+
+    def _code_for_approval(self, code: str) -> str:
+        """The program with the code of every nested LMP its plan-only run asked for: all the code that will run."""
+        parts = [code.rstrip()]
+        for (lmp, query, _context, _variables), prepared in (self._kept_answers or {}).items():
+            parts.append(f'# {lmp}({query[:200]!r}):\n{prepared.full_code()}')
+        shown = '\n\n'.join(parts)
+        if len(shown) > MAX_CODE_CHARS:
+            raise CodeRejected(f'the program and the code of its nested LMPs have {len(shown):,} characters, more than '
+                               f'the {MAX_CODE_CHARS:,} an approval can show; it was not run')
+        return shown
+
+    def _stop_unapproved(self, message: str) -> None:
+        """End the approved run at a step the approval did not cover (ExecutionStopped, reason 'unapproved')."""
+        watchdog = self.sandbox.watchdog
+        if watchdog is not None:  # inside a running program: a stop it cannot catch
+            watchdog.stop(message, 'unapproved')
+        raise ExecutionStopped(message, 'unapproved')
 
     def _report_failure(self, result: CommandResult, error: Exception) -> None:
         """Describe the failure; a message that cannot be built (a program's exception can carry anything) is

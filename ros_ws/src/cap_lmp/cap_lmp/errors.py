@@ -32,8 +32,9 @@ class UndefinedName(CodeRejected):
 class ExecutionStopped(SandboxError):
     """The running program was stopped: time limit, cancellation, memory or recursion limit, model deadline.
 
-    `reason` is one of 'timeout', 'cancelled', 'memory', 'recursion', 'model_timeout' (the command's model
-    requests took their overall deadline, Engine's `model_time_limit_s`).
+    `reason` is one of 'timeout', 'cancelled', 'memory', 'recursion', 'unapproved' (the approved run reached a step
+    its approval did not cover), 'model_timeout' (the command's model requests took their overall deadline,
+    Engine's `model_time_limit_s`).
     """
 
     def __init__(self, message: str, reason: str) -> None:
@@ -86,6 +87,11 @@ class RobotApiError(RuntimeError):
 
 class StoppedError(RobotApiError):
     """The program was stopped (/cap/stop or a cancelled /cap/execute goal) while it waited for the robot."""
+
+
+class UnapprovedAction(StoppedError):
+    """A robot call or model request that approval does not allow (approval.ApprovalGuard): refused, and the
+    program is stopped."""
 
 
 class SandboxProcessLost(SandboxError):

@@ -16,7 +16,8 @@ when:
 
 - **deadline**: the command's clock passed `time_limit_s` + KILL_MARGIN_S (0.5 s) ('timeout'). The clock runs from
   the run message, and again from the program's start (its first 'executing' event), so generation and execution
-  each get the time limit; robot API calls count, the model's time does not (this side answers the model requests,
+  each get the time limit; robot API calls count (a call still running at the limit is ended by `on_deadline`,
+  which stops the robot; a call after it is not made), the model's time does not (this side answers the model requests,
   so it knows that time exactly, and tells the sandbox process, whose watchdog excludes the same figure). The
   watchdog in the process stops the program at `time_limit_s` with a friendly error and keeps the session; the kill
   bounds everything it cannot see (a program that disabled tracing, one long C call, GEOS). After a robot call that
@@ -61,6 +62,7 @@ import time
 from typing import Any, Callable, Mapping, Sequence
 
 from cap_lmp import wire
+from cap_lmp.wire import CallableHandle
 from cap_lmp.approval import MAX_PLANNED_CALLS, ApprovalGate, planned_call
 from cap_lmp.engine import CODE, DONE, ERROR, EXECUTING, GENERATING, CommandResult, EngineEvent, check_program_size
 from cap_lmp.errors import CapLLMError, CodeRejected, ExecutionStopped, NotApproved, SandboxProcessLost
@@ -203,15 +205,6 @@ def _result(values: Any) -> CommandResult:
     return CommandResult(**fields)
 
 
-@dataclasses.dataclass(frozen=True)
-class CallableHandle:
-    """A function of the running program, passed to a robot API call (`run_controller(f, ...)`): the robot function
-    receives this instead, and may call the function through IsolatedEngine.invoke until it returns."""
-
-    id: int
-    name: str
-
-
 class InvokeError(Exception):
     """A call of the program's function through a handle failed; `kind` names why (the function's exception type,
     'ControllerOverrun' past its budget or without an answer in time, 'NotRunning', 'SandboxProcessLost')."""
@@ -263,7 +256,7 @@ class IsolatedEngine:
                  cancel_grace_s: float = 2.0, start_timeout_s: float = 60.0, send_timeout_s: float = 5.0,
                  model_time_limit_s: float = 120.0, address_space_extra_bytes: int | None = None,
                  jail: str = 'required', child_command: Sequence[str] | None = None,
-                 function_arguments: Sequence[str] = ()) -> None:
+                 function_arguments: Sequence[str] = (), on_deadline: Callable[[], None] | None = None) -> None:
         if jail not in JAIL_MODES:
             raise ValueError(f'jail must be one of {", ".join(JAIL_MODES)}, not {jail!r}')
         self.limits = limits or SandboxLimits()
@@ -290,6 +283,9 @@ class IsolatedEngine:
         self.default_lmp = ''
         self.restarts = 0
         self.approval: ApprovalGate | None = None  # set: each command is planned and waits for it (approval.py)
+        # Called (on a timer's thread) when the program's time limit passes while a robot call of it runs: it stops
+        # the robot, which ends the call, so that the time limit bounds motions too.
+        self.on_deadline = on_deadline
         # Robot API round trips as generated code saw them (socket and node included), over recent commands.
         self.api_call_seconds: list[float] = []
         self._listeners: list[Callable[[EngineEvent], None]] = []
@@ -540,7 +536,7 @@ class IsolatedEngine:
                                 clock.start_execution(now)
                         self._emit(event)
                     elif op == 'call':
-                        self._send(self._answer(message))
+                        self._send(self._answer(message, clock))
                         last_heard = clock.last_call_end = time.monotonic()  # the robot's time is not a stall
                     elif op == 'complete':
                         self._send(self._complete(message, clock))
@@ -718,22 +714,35 @@ class IsolatedEngine:
                                          if isinstance(t, (int, float)) and not isinstance(t, bool))
             del self.api_call_seconds[:-10_000]
 
-    def _answer(self, message: dict[str, Any]) -> bytes:
-        """Run one robot API call for the program; the encoded reply carries the value or the error."""
+    def _answer(self, message: dict[str, Any], clock: _Clock) -> bytes:
+        """Run one robot API call for the program; the encoded reply carries the value or the error. A call still
+        running when the program's time limit passes is ended then (on_deadline stops the robot)."""
         reply: dict[str, Any] = {'op': 'reply', 'id': message.get('id')}
         name, args, kwargs = message.get('name'), message.get('args'), message.get('kwargs')
         function = self._api.get(name) if isinstance(name, str) else None
         if function is None or not isinstance(args, list) or not isinstance(kwargs, dict):
             reply['error'] = {'type': 'RobotApiError', 'message': f'there is no robot function {str(name)[:100]!r}'}
             return wire.encode(reply)
+        left_s = self.limits.time_limit_s - clock.program_s(time.monotonic())
+        if left_s <= 0:
+            reply['error'] = {'type': 'StoppedError', 'message': f'the time limit of {self.limits.time_limit_s:g} s '
+                              'passed; the robot was not called'}
+            return wire.encode(reply)
         args = [_imported(value) for value in args]
         kwargs = {key: _imported(value) for key, value in kwargs.items()}
+        fired = threading.Event()
+        deadline = (threading.Timer(left_s, self._deadline_passed, (fired,)) if self.on_deadline is not None
+                    else None)
         with self._invoke_lock:
             self._call_open = True
         try:
             try:
+                if deadline is not None:
+                    deadline.start()
                 reply['value'] = function(*args, **kwargs)
             finally:
+                if deadline is not None:
+                    deadline.cancel()
                 with self._invoke_lock:  # waits for a call of the program's function in flight
                     self._call_open = False
             return wire.encode(reply)  # a value that cannot travel is an error of the call, not of the channel
@@ -741,8 +750,22 @@ class IsolatedEngine:
             reply.pop('value', None)
             kind = next((cls.__name__ for cls in type(error).__mro__ if cls.__name__ in wire.API_ERRORS),
                         'RobotApiError')
-            reply['error'] = {'type': kind, 'message': str(error)[:2000]}
+            text = str(error)[:2000]
+            if fired.is_set():
+                kind, text = 'StoppedError', (f'the time limit of {self.limits.time_limit_s:g} s passed during '
+                                              f'{name}(), so the robot was stopped ({text})')
+            reply['error'] = {'type': kind, 'message': text}
             return wire.encode(reply)
+
+    def _deadline_passed(self, fired: threading.Event) -> None:
+        """The program's time limit passed during a robot call: stop the robot, so that the call ends now."""
+        fired.set()
+        on_deadline = self.on_deadline
+        if on_deadline is not None:
+            try:
+                on_deadline()
+            except Exception:  # the stop's own failure must not end the timer's thread loudly; the kill follows
+                pass
 
     # -------------------------------------------------------------------------------------------- invoke
     def invoke(self, handle: CallableHandle | int, args: Sequence[Any], budget_s: float,

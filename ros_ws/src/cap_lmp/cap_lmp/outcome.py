@@ -13,7 +13,8 @@ from cap_lmp.errors import (CodeRejected, ExecutionStopped, GenerationError, LLM
 
 class Outcome(str, enum.Enum):
     """DONE: the program ran to its end. REFUSED: the code was refused before it ran, by the checks or by the
-    person who was asked to approve it (nothing moved).
+    person who was asked to approve it (nothing moved), or its approved run was stopped at a step the approval did
+    not cover (what was approved before it ran).
     CANCELLED: a stop or cancel ended it. MODEL_ERROR: the model gave no usable code (an endpoint failure, wrong
     function generated, the model deadline). ERROR: anything else (the program raised, a limit stopped it)."""
 
@@ -33,6 +34,8 @@ def outcome_of(error: BaseException) -> Outcome:
     if isinstance(error, (ExecutionStopped, SandboxProcessLost)):
         if error.reason == 'cancelled':
             return Outcome.CANCELLED
+        if error.reason == 'unapproved':  # the approved run reached a step its approval did not cover
+            return Outcome.REFUSED
         return Outcome.MODEL_ERROR if error.reason == 'model_timeout' else Outcome.ERROR
     if isinstance(error, (LLMError, GenerationError)):
         return Outcome.MODEL_ERROR

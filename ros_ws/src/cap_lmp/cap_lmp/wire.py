@@ -7,6 +7,7 @@ them with FrameBuffer from a socket it polls, so a half-sent frame never blocks 
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import struct
 from typing import Any
@@ -35,6 +36,17 @@ API_ERRORS: dict[str, type[Exception]] = {
 }
 # A function passed to a robot API call travels as {CALLABLE_KEY: handle, 'name': its name} (engine_process.py).
 CALLABLE_KEY = '$callable'
+
+
+@dataclasses.dataclass(frozen=True)
+class CallableHandle:
+    """A function of the running program, passed to a robot API call (`run_controller(f, ...)`): the robot function
+    receives this instead, and may call the function through IsolatedEngine.invoke until it returns."""
+
+    id: int
+    name: str
+
+
 MAX_ITEMS = 200_000  # values (list items, array elements) in one message
 _ARRAY_KEY = '__ndarray__'
 # Only plain numeric arrays cross the boundary: no object, string or structured dtypes.

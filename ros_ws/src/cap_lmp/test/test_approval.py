@@ -9,7 +9,7 @@ import threading
 import numpy as np
 import pytest
 
-from cap_lmp.approval import PlannedCall, plain, planned_call
+from cap_lmp.approval import FUNCTION, MAX_PLAN_VALUES, PlanError, PlannedCall, plain, planned_call
 from cap_lmp.engine import CODE, EXECUTING
 from cap_lmp.errors import NotApproved
 from cap_lmp.isolated_engine import IsolatedEngine
@@ -33,6 +33,20 @@ PROGRAMS = {
     'move the red block to the middle': "put_first_on_second('red block', np.array([0.0, -0.5]))",
     'move the purple block': "put_first_on_second('red block', 'red bowl')\nget_obj_pos('purple block')",
     'dance forever': "while True:\n    put_first_on_second('red block', 'red bowl')",
+    # Tells the plan-only run from the real one (a recorded move changes nothing) and asks a nested LMP another
+    # question then: its answer would move a block the plan never showed.
+    'tidy up': (
+        "start = get_obj_pos('red block')\n"
+        "put_first_on_second('red block', 'red bowl')\n"
+        "moved = bool(np.linalg.norm(get_obj_pos('red block') - start) > 0.01)\n"
+        "names = parse_obj_name('the other block' if moved else 'nothing', f'objects = {get_obj_names()}')\n"
+        "for name in names:\n"
+        "    put_first_on_second(name, 'blue bowl')"),
+    '# nothing.': 'ret_val = []',
+    '# the other block.': "ret_val = ['blue block']",
+    'start a list': 'marks = [1]\ntally = {"n": 0}\ndef count():\n    tally["n"] += 1\n    return tally["n"]',
+    'mark and count': "marks.append(2)\ncount()\nput_first_on_second('red block', 'red bowl')",
+    'report': "say(f'{len(marks)} marks, {tally[\"n\"]} counted')",
 }
 
 
@@ -92,7 +106,9 @@ def test_an_approved_program_runs_what_its_plan_showed_after_the_gate(engine, se
     result = engine.run('put the blocks in the bowls of their colour')
     assert result.success, result.message
     code, plan = gate.shown[0]
-    assert code == result.code and 'put_first_on_second' in code
+    # All the code that runs is shown: the program, then each nested LMP's answer with its query.
+    assert code.startswith(result.code) and 'put_first_on_second' in code
+    assert "# parse_obj_name('the blocks'):\nret_val = [name for name in objects if 'block' in name]" in code
     assert [(call.function, call.args) for call in plan] == [
         ('put_first_on_second', ('red block', 'red bowl')), ('put_first_on_second', ('blue block', 'blue bowl')),
         ('say', ('done sorting',))]
@@ -114,6 +130,30 @@ def test_a_rejected_program_moves_nothing_and_leaves_the_session_as_it_was(engin
     engine.approval = None
     after = engine.run('say sorted_count')  # the plan-only run bound it in a copy of the scope only
     assert not after.success and 'sorted_count' in after.message
+
+
+def test_a_rejected_plan_changes_no_object_of_the_session(engine, world):
+    assert engine.run('start a list').success  # a list, a dict and a function that changes it, in the session
+    engine.approval = Gate(world, 'reject')
+    result = engine.run('mark and count')  # its plan-only run appended to the list and called the function
+    assert result.outcome is Outcome.REFUSED and world.moves == []
+    engine.approval = None
+    assert engine.run('report').success
+    assert world.said == ['1 marks, 0 counted']  # what the session held before the rejected command
+
+
+def test_a_nested_query_that_differs_after_approval_is_not_asked_and_stops_the_program(engine, server, world):
+    gate = Gate(world)
+    engine.approval = gate
+    result = engine.run('tidy up')
+    code, plan = gate.shown[0]
+    assert "# parse_obj_name('nothing'):\nret_val = []" in code
+    assert [call.args for call in plan] == [('red block', 'red bowl')]
+    assert result.outcome is Outcome.REFUSED and result.stop_reason == 'unapproved', result.message
+    assert "asked parse_obj_name for code with a query the approved plan did not ask ('the other block')" \
+        in result.message
+    assert world.moves == [('red block', 'red bowl')]  # the approved move; the blue block stays where it was
+    assert not [r for r in server.requests if r.prompt.rstrip().endswith('# the other block.')]
 
 
 def test_a_failing_plan_is_reported_before_anything_moves(engine, world):
@@ -154,11 +194,16 @@ def test_a_program_with_too_many_actions_is_not_planned(engine, world):
 
 
 def test_plain_values_and_the_wire_form_of_a_planned_call():
-    assert plain(np.array([0.1, 0.2])) == [0.1, 0.2]
-    assert plain(np.float32(0.5)) == 0.5 and plain(float('nan')) == 'nan' and plain(object()) == '<object>'
-    assert plain('x' * 1000) == 'x' * 500 and len(plain(list(range(1000)))) == 100
+    assert plain(np.array([0.1, 0.2])) == [0.1, 0.2] and plain(np.array([[1, 2]])) == [[1, 2]]
+    assert plain(np.float32(0.5)) == 0.5 and plain(float('nan')) == 'nan' and plain(len) == FUNCTION
+    # In full, as the real run will be held to it: no text or list is cut short.
+    assert plain('x' * 1000) == 'x' * 1000 and len(plain(list(range(5000)))) == 5000
+    for unshowable in (object(), 10 ** 30, [[[[[[[[[[1]]]]]]]]]], np.zeros(MAX_PLAN_VALUES + 1)):
+        with pytest.raises(PlanError):
+            plain(unshowable)
     call = PlannedCall('put_first_on_second', ('red block', [0.0, -0.5]))
     assert planned_call(call.to_wire()) == call
-    for bad in ({'function': 'os.system'}, {'function': 'f', 'args': 'x'}, ['f'], {'function': 3}):
+    for bad in ({'function': 'os.system'}, {'function': 'f', 'args': 'x'}, ['f'], {'function': 3},
+                {'function': 'f', 'args': [{'deep': [[[[[[[[[1]]]]]]]]]}]}):
         with pytest.raises(ValueError):
             planned_call(bad)

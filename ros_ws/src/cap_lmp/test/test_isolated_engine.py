@@ -17,6 +17,7 @@ import pytest
 
 from cap_lmp import wire
 from cap_lmp.engine import CODE, DONE, EXECUTING, GENERATING
+from cap_lmp.errors import StoppedError
 from cap_lmp.isolated_engine import IsolatedEngine
 from cap_lmp.llm import OpenAICompatibleClient
 from cap_lmp.sandbox import SandboxLimits
@@ -36,6 +37,7 @@ PROGRAMS = {
     'crash the interpreter': 't = ()\nfor i in range(300000):\n    t = (t,)\nh = hash(t)',
     'ask the blocks': "blocks = parse_obj_name('the blocks', f'objects = {get_obj_names()}')\nsay(blocks)",
     '# the blocks.': "ret_val = [name for name in objects if 'block' in name]",
+    'move slowly': "slow_move()\nsay('after the move')",
 }
 # Quadratic C work on aliased data, each within the sandbox's size limits (test_sandbox_review.QUADRATIC_ATTEMPTS).
 QUADRATIC = {
@@ -108,6 +110,27 @@ def test_an_endless_loop_is_stopped_by_the_sandbox_and_the_process_stays(server,
         assert quick.run('put the red block in the red bowl').success
     finally:
         quick.close()
+
+
+def test_a_robot_call_that_outlasts_the_time_limit_is_ended_by_stopping_the_robot(server, world):
+    stopped = threading.Event()
+
+    def slow_move() -> str:  # a motion of 30 s, unless the robot is stopped
+        if stopped.wait(30.0):
+            raise StoppedError('the motion was stopped')
+        return 'arrived'
+
+    limited = IsolatedEngine(build_engine, {**world.api(), 'slow_move': slow_move},
+                             OpenAICompatibleClient(server.base_url, 'scripted-model'), SandboxLimits(time_limit_s=1.0),
+                             on_deadline=stopped.set)
+    try:
+        result = limited.run('move slowly')
+        assert stopped.is_set() and not result.success, result.message
+        assert result.message.startswith('StoppedError: the time limit of 1 s passed during slow_move(), so the robot '
+                                         'was stopped')
+        assert world.said == [] and limited.restarts == 0  # the program went no further, and the session stays
+    finally:
+        limited.close()
 
 
 def test_cancel_stops_a_running_program(engine):

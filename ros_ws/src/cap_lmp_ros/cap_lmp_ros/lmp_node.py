@@ -12,7 +12,10 @@ With `require_approval`, each program waits after its code is generated and chec
 robot actions it would take (cap_lmp.approval; the domain says which functions act and what their calls mean), the
 code and that plan are published on /cap/status (STAGE_AWAITING_APPROVAL, with `plan`), and the program runs only
 once /cap/approve approves it. A rejection, or no answer within `approval_timeout_s`, ends the command as refused
-(nothing of it ran); a stop ends it as cancelled.
+(nothing of it ran); a stop ends it as cancelled. The node holds the run to what was approved on its own side of
+every robot call and model request (cap_lmp.approval.ApprovalGuard), so that neither the program nor its sandbox
+process can get around it: no acting call before approval, after it only the approved calls in their order, and no
+new code from the model; a call that breaks this is refused, the program stopped and the command refused.
 
 Whatever a program or a model produced is made safe before it leaves the node (safe_text.wire_text: valid UTF-8,
 bounded; logs also without control characters), so no text can kill the thread that publishes it. If the worker
@@ -48,7 +51,7 @@ from cap_interfaces.action import ExecuteCommand
 from cap_interfaces.msg import GraphNames, PlannedMotion, StatusEvent
 from cap_interfaces.srv import ApproveCommand
 from cap_lmp import engine as engine_module
-from cap_lmp.approval import PlannedCall
+from cap_lmp.approval import ApprovalGuard, GuardedClient, PlannedCall, guarded_functions
 from cap_lmp.cassette import make_client
 from cap_lmp.engine_protocol import CommandEngine
 from cap_lmp.isolated_engine import JAIL_MODES, IsolatedEngine
@@ -96,9 +99,12 @@ def outcome_name(value: int) -> str:
 
 class LmpNode(Node):
     """See the module docstring. `thread_watch` is told when the worker thread dies (default: a watch of its own
-    that logs it); a ValueError whose message is one line says what to fix in the configuration."""
+    that logs it); `sandbox_command` replaces the sandbox process's command line (tests start one that misbehaves
+    on purpose; not a parameter, so that nothing on the ROS graph can choose what runs); a ValueError whose message
+    is one line says what to fix in the configuration."""
 
-    def __init__(self, *, thread_watch: ThreadWatch | None = None, **kwargs: Any) -> None:
+    def __init__(self, *, thread_watch: ThreadWatch | None = None, sandbox_command: list[str] | None = None,
+                 **kwargs: Any) -> None:
         super().__init__('lmp_node', **kwargs)
         self._declared = set(parameter_names(LmpNodeConfig))
         config = self.config = declare_config(self, LmpNodeConfig)
@@ -147,7 +153,10 @@ class LmpNode(Node):
         self._status_publisher = self.create_publisher(StatusEvent, GraphNames.STATUS_TOPIC, EVENT_QOS)
         say_publisher = self.create_publisher(String, GraphNames.SAY_TOPIC, EVENT_QOS)
         self.robot = self.domain.robot_api(self, say_publisher, config.service_timeout_s, config.motion_timeout_s)
-        api = engine_api(self.domain, self.robot.functions())
+        # Approval is held on this side of every robot call and model request, where no program reaches it.
+        self.approval_guard = ApprovalGuard(self.domain.plan_functions)
+        api = guarded_functions(engine_api(self.domain, self.robot.functions()), self.approval_guard,
+                                self._stop_unapproved)
         limits = SandboxLimits(time_limit_s=config.time_limit_s)
         engine_options = {'regenerations': config.regenerations, 'plan_functions': list(self.domain.plan_functions)}
         self.require_approval = config.require_approval
@@ -157,13 +166,15 @@ class LmpNode(Node):
         self.model_ready_generation = 0  # the server start whose warm-up finished last
         local_client = (LocalModelClient(self.model_server, api=config.api or 'completions', gate=self.model_ready)
                         if self.model_server else None)
-        client = local_client or make_client(**client_options)
+        client = GuardedClient(local_client or make_client(**client_options), self.approval_guard,
+                               self._stop_unapproved)
         if config.sandbox_process:
             isolated = IsolatedEngine(self.domain.build_engine, api, client, limits,
                                       stall_limit_s=config.stall_limit_s,
                                       model_time_limit_s=config.model_time_limit_s, jail=config.jail,
                                       engine_options=engine_options,
-                                      function_arguments=self.domain.function_arguments)
+                                      function_arguments=self.domain.function_arguments,
+                                      on_deadline=self.robot.stop, child_command=sandbox_command)
             where = f'sandbox process {isolated.pid}'
             self.engine = isolated
         else:
@@ -370,6 +381,7 @@ class LmpNode(Node):
             if begin_command is not None:
                 begin_command()
             self.engine.approval = self._await_approval if self.require_approval else None
+            self.approval_guard.begin(self.require_approval)
             try:
                 job.result = self.engine.run(job.command)
                 job.outcome = self._outcome(job)
@@ -388,7 +400,12 @@ class LmpNode(Node):
         """Publish the final status of a job that ran, and name its outcome."""
         result = job.result
         outcome = result.outcome
-        if outcome not in (Outcome.DONE, Outcome.REFUSED) and job.cancel_requested:
+        violation = self.approval_guard.violation
+        if violation:  # the program broke its approval: refused, whatever the stop made of it in the sandbox
+            outcome = result.outcome = Outcome.REFUSED
+            result.success = False
+            result.message = violation if violation in result.message else f'{violation} ({result.message})'
+        elif outcome not in (Outcome.DONE, Outcome.REFUSED) and job.cancel_requested:
             outcome = Outcome.CANCELLED  # whatever the stop caused (a failed robot call, a lost model request)
         if outcome is Outcome.CANCELLED and job.stop_reason:
             result.message = f'{job.stop_reason} ({result.message})'
@@ -433,6 +450,8 @@ class LmpNode(Node):
         job = self._current
         if job is None:
             raise NotApproved('no command is running', 'rejected')
+        if self.approval_guard.violation:  # it acted before asking: nobody is asked
+            raise NotApproved(f'{self.approval_guard.violation}; nothing more ran', 'rejected')
         steps = [self._plan_step(call) for call in calls]
         timeout_s = self.approval_timeout_s
         service = self.resolve_topic_name(GraphNames.APPROVE_SERVICE)
@@ -454,6 +473,7 @@ class LmpNode(Node):
         approved, reason = job.decision
         if not approved:
             raise NotApproved('rejected' + (f': {reason}' if reason else '') + '; nothing ran', 'rejected')
+        self.approval_guard.approve(calls)  # from now on the program may make exactly these calls
 
     def _plan_step(self, call: PlannedCall) -> PlanStep:
         try:
@@ -478,6 +498,10 @@ class LmpNode(Node):
                                                    'rejected: it will not run')
         self.get_logger().info(terminal_text(response.message))
         return response
+
+    def _stop_unapproved(self) -> None:
+        """The guard refused a call of the running program: stop it (the call itself did not go through)."""
+        self.engine.cancel()
 
     # -------------------------------------------------------------------------------------------- stop, reset
     def _stop_running(self) -> None:

@@ -4,8 +4,9 @@
 
 It speaks the framing of engine_process (multiprocessing Connection) and, after the run message, does what `mode`
 says: send half a message, flood heartbeats, call the robot without reading replies, send malformed messages, die of
-a real-time signal, fork a grandchild that keeps the socket, send malformed model requests, or behave but
-answer a stop late.
+a real-time signal, fork a grandchild that keeps the socket, send malformed model requests, behave but
+answer a stop late, or (breaks_approval) make robot calls before and after asking for approval, as each command
+(a JSON object: 'before', 'plan', 'after') says.
 """
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ def main() -> None:
     if mode == 'never_ready':
         half_a_message()
     send({'op': 'ready', 'default_lmp': 'toy_ui'})
-    data.recv_bytes()  # run
+    run_message = data.recv_bytes()
     if mode == 'half_message':
         half_a_message()
     elif mode == 'flood':
@@ -77,6 +78,24 @@ def main() -> None:
             send({'op': 'complete', 'id': len(replies) + 1, 'request': request})
             replies.append(json.loads(data.recv_bytes()))
         send({'op': 'result', 'result': {**RESULT, 'message': json.dumps(replies)[:5000]}})
+    elif mode == 'breaks_approval':  # for every command, makes the calls its text names, then asks for approval
+        run = json.loads(run_message)
+        while True:
+            approve_plan = json.loads(run['command']) if run['command'].startswith('{') else {}
+            ordered = approve_plan.get('before', []), approve_plan.get('after', [])
+            replies = []
+            for call in ordered[0]:
+                send({'op': 'call', 'id': len(replies) + 1, **call})
+                replies.append(json.loads(data.recv_bytes()))
+            send({'op': 'approve', 'id': len(replies) + 1, 'code': run['command'],
+                  'plan': approve_plan.get('plan', [])})
+            replies.append(json.loads(data.recv_bytes()))
+            for call in ordered[1] if 'error' not in replies[-1] else []:
+                send({'op': 'call', 'id': len(replies) + 1, **call})
+                replies.append(json.loads(data.recv_bytes()))
+            send({'op': 'result', 'result': {**RESULT, 'command': run['command'], 'outcome': 'error',
+                                             'message': json.dumps(replies)[:5000]}})
+            run = json.loads(data.recv_bytes())
     elif mode == 'slow_robot_then_result':
         send({'op': 'call', 'id': 1, 'name': 'slow', 'args': [], 'kwargs': {}})
         data.recv_bytes()
