@@ -2,13 +2,14 @@
 of `cap console`, a process of its own, against the whole graph with the MuJoCo simulator in this process. What is
 checked is what the person sees on the page and what the simulator did: camera pictures that change when the arm
 moves, a typed command's code and outcome, the stop button halting the arm, approval holding a command until
-approved and dropping it when rejected. The graph's RViz output (markers, robot description) is read by a
-subscriber beside it.
+approved and dropping it when rejected, and no camera picture on a page of another origin. The graph's RViz output
+(markers, robot description) is read by a subscriber beside it.
 
 Without Chromium (`make browser`) these tests are skipped, unless CAP_REQUIRE_BROWSER=1 (CI) makes that a failure.
 """
 from __future__ import annotations
 
+import http.server
 import os
 import pathlib
 import queue
@@ -283,6 +284,51 @@ def test_approval_holds_a_command_until_approved_and_drops_it_when_rejected(rig)
                    for name, position in placed.items())
     finally:
         rig.lmp.set_parameters([Parameter('require_approval', value=False)])
+
+
+class _OtherPage(http.server.BaseHTTPRequestHandler):
+    """Another local page (another port of this host: another origin of the same site): `html` at every path."""
+
+    html = ''
+
+    def do_GET(self) -> None:  # noqa: N802 - http.server's name
+        body = self.html.encode()
+        self.send_response(200)
+        self.send_header('Content-Type', 'text/html; charset=utf-8')
+        self.send_header('Content-Length', str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, *_: object) -> None:
+        pass
+
+
+def test_another_local_page_cannot_show_the_console_cameras(rig):
+    page = rig.page
+    page.wait_for_function(f"document.querySelector('img[data-topic=\"{FRONT}\"]')?.naturalWidth === 640")
+    token = page.eval_on_selector('meta[name="cap-page-token"]', 'meta => meta.content')
+    port = rig.url.rstrip('/').rsplit(':', 1)[1]
+    # An <img> sends no Origin header. Guessed: without the token; the last two even with it (read somehow).
+    addresses = {'guessed': f'http://127.0.0.1:{port}/stream{FRONT}',
+                 'with-token': f'http://127.0.0.1:{port}/stream{FRONT}?token={token}',
+                 'by-name': f'http://localhost:{port}/stream{FRONT}?token={token}'}
+    _OtherPage.html = '<!DOCTYPE html><title>another page</title>' + ''.join(
+        f'<img id="{name}" src="{url}" onload="this.dataset.ended=\'load\'" onerror="this.dataset.ended=\'error\'">'
+        for name, url in addresses.items())
+    server = http.server.ThreadingHTTPServer(('127.0.0.1', 0), _OtherPage)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    other = rig.browser.new_page()
+    try:
+        other.goto(f'http://127.0.0.1:{server.server_address[1]}/')
+        other.wait_for_function('Array.from(document.images).every(image => image.dataset.ended)')
+        ended = other.eval_on_selector_all('img', 'images => images.map(i => [i.id, i.dataset.ended, i.naturalWidth])')
+        assert ended == [[name, 'error', 0] for name in addresses]
+        # The console's own page still shows the camera.
+        assert page.eval_on_selector(f'img[data-topic="{FRONT}"]', 'image => image.naturalWidth') == 640
+    finally:
+        other.close()
+        server.shutdown()
+        server.server_close()
 
 
 def _plan_arrows(markers: MarkerArray) -> list[Marker]:

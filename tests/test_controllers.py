@@ -2,7 +2,8 @@
 process, over DDS. The programs come from a cassette (the domain's reference programs, written by hand, plus the
 misbehaving controllers below); the function generation LMP writes the PD controller and the impedance law.
 
-What a user notices: the pole stays up for 30 s from several seeded starts; a controller that returns NaN, raises
+What a user notices: the pole stays up for 30 s from several seeded starts, and again in the next run after it fell
+(every run starts from the seeded start); a controller that returns NaN, raises
 or takes too long is stopped with a message that says so, the cart's motor is switched off and the next command
 runs; /cap/stop halts a controller within 0.5 s of simulated time; a tool held by impedance control yields to a
 20 N push by 20 N / K and returns to within 5 mm of its goal.
@@ -44,6 +45,9 @@ MISBEHAVING = {
     'run a controller that takes its time': (
         'def controller(x, x_dot, theta, theta_dot):\n    n = 0\n    while n < 10 ** 9:\n        n += 1\n'
         "    return 0.0\nrun_controller(controller, rate=100, duration=5, plant='cartpole')"),
+    'run a controller that lets the pole fall': (
+        'def controller(x, x_dot, theta, theta_dot):\n    return 0.0\n'
+        "run_controller(controller, rate=100, duration=5, plant='cartpole')"),
     HOLD_SOFTLY: (
         'goal_pose = get_ee_pose()\ndef controller(t):\n'
         f'    return ee_impedance_control(goal_pose, stiffness={STIFFNESS:g}, damping=60)\n'
@@ -145,6 +149,22 @@ def test_a_generated_pd_controller_balances_the_pole_for_30_seconds_from_seeded_
         answer = user.run(BALANCE)
         assert answer.outcome == ExecuteCommand.Result.OUTCOME_DONE, f'seed {seed}: {answer.message}'
         assert 'keep_pole_upright_with_pd_control' in answer.code  # written by function generation
+        assert user.said[-1] == 'The pole stayed up for 30.0 s'
+
+
+def test_a_run_after_a_run_in_which_the_pole_fell_balances_again(controllers):
+    _, user = controllers
+    user.reset_scene(2)
+    answer = user.run('run a controller that lets the pole fall')
+    assert answer.outcome == ExecuteCommand.Result.OUTCOME_ERROR and 'the pole leaned' in answer.message
+
+    def lean() -> float:
+        return abs(user.latest()[1].get(plants.POLE_JOINT, (0.0, 0.0, 0.0))[0])
+
+    assert wait(lambda: lean() > 0.5)  # the pole lies fallen: no reset of the scene from here on
+    for _ in range(2):  # the cassette's PD program twice in a row, each from the seeded start
+        answer = user.run(BALANCE)
+        assert answer.outcome == ExecuteCommand.Result.OUTCOME_DONE, answer.message
         assert user.said[-1] == 'The pole stayed up for 30.0 s'
 
 

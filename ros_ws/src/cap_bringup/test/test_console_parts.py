@@ -1,5 +1,6 @@
 """The console's parts without ROS: images to JPEG, the page's state from status events, and the web server's
-guards, page and camera streams, against a backend in memory (the console node is the real one; see
+guards (this host, this page, the page token, one log line per malformed request), page and camera streams, against a
+backend in memory (the console node is the real one; see
 tests/test_console.py for the page in a browser against the graph)."""
 from __future__ import annotations
 
@@ -7,6 +8,9 @@ import array
 import asyncio
 import http.client
 import json
+import logging
+import re
+import socket
 import threading
 import time
 
@@ -16,7 +20,7 @@ import pytest
 from aiohttp import ClientSession, WSServerHandshakeError
 
 from cap_bringup.console.frames import FrameChannel, RawImage, UnsupportedImage, encode_jpeg, image_array
-from cap_bringup.console.server import ConsoleServer
+from cap_bringup.console.server import ConsoleServer, guard
 from cap_bringup.console.state import ConsoleState, StatusRecord
 
 
@@ -132,9 +136,11 @@ def served():
     server.close()
 
 
-def _get(server: ConsoleServer, path: str, host: str | None = None) -> tuple[int, bytes, dict]:
+def _get(server: ConsoleServer, path: str, host: str | None = None, **headers: str) -> tuple[int, bytes, dict]:
+    """GET `path`; `headers` by their names with '_' for '-' (Sec_Fetch_Site='cross-site')."""
     connection = http.client.HTTPConnection('127.0.0.1', server.port, timeout=10)
-    connection.request('GET', path, headers={'Host': host} if host else {})
+    sent = {name.replace('_', '-'): value for name, value in headers.items()}
+    connection.request('GET', path, headers={**sent, 'Host': host} if host else sent)
     response = connection.getresponse()
     body = response.read()
     connection.close()
@@ -176,11 +182,18 @@ def test_the_websocket_takes_requests_from_the_console_page_only(served):
                                              "unknown request 'launch'"]
 
 
+def _page_token(server: ConsoleServer) -> str:
+    """The token the console's page carries, read from the page as the page's script reads it."""
+    _, page, _ = _get(server, '/')
+    return re.search(rb'<meta name="cap-page-token" content="([0-9a-f]+)">', page).group(1).decode()
+
+
 def test_a_camera_stream_sends_jpeg_frames_while_watched_and_lets_go_after(served):
     backend, server = served
-    assert _get(server, '/stream/cap/sim/cameras/nowhere/color')[0] == 404
+    token = _page_token(server)
+    assert _get(server, f'/stream/cap/sim/cameras/nowhere/color?token={token}')[0] == 404
     connection = http.client.HTTPConnection('127.0.0.1', server.port, timeout=10)
-    connection.request('GET', '/stream' + MemoryBackend.TOPIC)
+    connection.request('GET', f'/stream{MemoryBackend.TOPIC}?token={token}')
     response = connection.getresponse()
     assert response.getheader('Content-Type') == 'multipart/x-mixed-replace; boundary=cap-frame'
     assert backend.channel.viewers == 1
@@ -199,6 +212,82 @@ def test_a_camera_stream_sends_jpeg_frames_while_watched_and_lets_go_after(serve
     connection.close()
     backend.channel.put(_rgb())  # the next write finds the browser gone
     assert backend.unwatched.wait(10.0) and backend.channel.viewers == 0
+
+
+def test_a_camera_stream_needs_the_token_of_the_console_page(served):
+    backend, server = served
+    token = _page_token(server)
+    assert token == server.page_token and len(token) == 48
+    for address in (f'/stream{MemoryBackend.TOPIC}', f'/stream{MemoryBackend.TOPIC}?token=',
+                    f'/stream{MemoryBackend.TOPIC}?token={token[:-1]}0', f'/stream{MemoryBackend.TOPIC}?token=x'):
+        status, body, _ = _get(server, address)
+        assert status == 403 and b'console page' in body, address
+    assert backend.channel.viewers == 0  # refused before the topic is subscribed
+    backend.channel.put(_rgb())
+    connection = http.client.HTTPConnection('127.0.0.1', server.port, timeout=10)
+    connection.request('GET', f'/stream{MemoryBackend.TOPIC}?token={token}')  # a local program, as the page does
+    response = connection.getresponse()
+    assert response.status == 200 and response.readline() == b'--cap-frame\r\n'
+    connection.close()
+    other = ConsoleServer(MemoryBackend(), port=0)  # another console: another token
+    assert other.page_token != token
+    other.close()
+
+
+def test_what_a_browser_marks_as_from_another_page_is_refused_everywhere(served):
+    _, server = served
+    token = _page_token(server)
+    stream = f'/stream{MemoryBackend.TOPIC}?token={token}'
+    foreign = [  # (path, headers) of requests other pages make
+        (stream, {'Sec_Fetch_Site': 'cross-site', 'Sec_Fetch_Mode': 'no-cors', 'Sec_Fetch_Dest': 'image'}),
+        (stream, {'Sec_Fetch_Site': 'same-site', 'Sec_Fetch_Mode': 'no-cors', 'Sec_Fetch_Dest': 'image'}),
+        ('/static/console.js', {'Sec_Fetch_Site': 'same-site', 'Sec_Fetch_Mode': 'no-cors',
+                                'Sec_Fetch_Dest': 'script'}),
+        ('/', {'Sec_Fetch_Site': 'cross-site', 'Sec_Fetch_Mode': 'navigate', 'Sec_Fetch_Dest': 'iframe'}),
+        (stream, {'Sec_Fetch_Site': 'cross-site', 'Sec_Fetch_Mode': 'navigate', 'Sec_Fetch_Dest': 'document'}),
+        (stream, {'Referer': 'http://127.0.0.1:1/page.html'}),  # an older browser: no Sec-Fetch-Site
+        ('/static/console.css', {'Referer': 'http://localhost.evil.example/'}),
+        (stream, {'Origin': 'http://127.0.0.1:1'}), (stream, {'Origin': 'null'}),
+        ('/', {'Sec_Fetch_Site': 'no-such-value'}),
+    ]
+    for path, headers in foreign:
+        status, body, _ = _get(server, path, **headers)
+        assert status == 403 and body == b'only the console page itself may use the console\n', (path, headers)
+    own = f'http://127.0.0.1:{server.port}/'
+    allowed = [  # the console's own page, a person opening it (typed, or a link from elsewhere), a local program
+        ('/', {'Sec_Fetch_Site': 'none', 'Sec_Fetch_Mode': 'navigate', 'Sec_Fetch_Dest': 'document'}),
+        ('/', {'Sec_Fetch_Site': 'cross-site', 'Sec_Fetch_Mode': 'navigate', 'Sec_Fetch_Dest': 'document'}),
+        ('/static/console.js', {'Sec_Fetch_Site': 'same-origin', 'Sec_Fetch_Mode': 'no-cors',
+                                'Sec_Fetch_Dest': 'script', 'Referer': own}),
+        ('/static/console.css', {'Referer': f'http://localhost:{server.port}/'}), ('/static/console.css', {}),
+    ]
+    for path, headers in allowed:
+        assert _get(server, path, **headers)[0] == 200, (path, headers)
+    stream_headers = {'Sec-Fetch-Site': 'same-origin', 'Sec-Fetch-Mode': 'no-cors', 'Sec-Fetch-Dest': 'image',
+                      'Referer': own}
+    assert guard(f'127.0.0.1:{server.port}', '/stream/x', stream_headers, {f'127.0.0.1:{server.port}'}) == ''
+    assert guard('evil.example', '/', {}, {f'127.0.0.1:{server.port}'}).startswith('the console answers only')
+
+
+def test_a_malformed_request_is_answered_400_and_logged_in_one_line(served, caplog):
+    _, server = served
+    requests = [f'GET / HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\nHost: evil.example\r\n\r\n'.encode(),
+                b'GET / HTTP/1.1\r\nHost: x\r\nX-\x1b[31mBad: 1\r\n\r\n',
+                b'GET / HTTP/1.1\r\nHost: x\r\nX-Long: ' + b'a' * 20000 + b'\r\n\r\n']
+    with caplog.at_level(logging.DEBUG, logger='aiohttp.server'):
+        for number, request in enumerate(requests, start=1):
+            with socket.create_connection(('127.0.0.1', server.port), timeout=10) as connection:
+                connection.sendall(request)
+                assert connection.recv(100).startswith(b'HTTP/1.0 400 Bad Request'), request[:60]
+            assert _wait(lambda: len(caplog.records) >= number), request[:60]
+    assert len(caplog.records) == len(requests)
+    for record in caplog.records:
+        line = record.getMessage()
+        assert record.exc_info is None and not record.exc_text and record.levelno == logging.WARNING
+        assert '\n' not in line and '\x1b' not in line and 'a malformed request, answered 400' in line, line
+    assert "Duplicate 'Host' header found" in caplog.records[0].getMessage()
+    assert len(caplog.records[2].getMessage()) < 500
+    assert _get(server, '/')[0] == 200  # and the server goes on
 
 
 def _wait(predicate, timeout: float = 10.0) -> bool:

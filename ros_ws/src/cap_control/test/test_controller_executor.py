@@ -12,37 +12,36 @@ from cap_control.controller.executor import ControlLoop, Outcome, PlantError
 from cap_control.controller.plan import ControllerFailure, Reading, check_output, make_run
 from cap_controllers import plants
 from cap_controllers.plants import ArmState
+from cap_sim_bridge.lockstep import Lockstep
 from cap_sim_bridge.scenes import controllers as controller_scene
 from cap_sim_bridge.world import World
 
 
 class WorldPlant:
-    """The loop's Plant port on the world itself, stepping in lockstep as the bridge does."""
+    """The loop's Plant port on the world itself, through the simulator's own lockstep (what ControlStep serves)."""
 
     def __init__(self, world: World, spec: plants.PlantSpec) -> None:
         self.world, self.spec = world, spec
+        self.lockstep = Lockstep(world, 0.0, timeout_s=60.0)
         self.released = False
-        self.started = False
+
+    def start(self):
+        return self._answer(self.lockstep.start, self.spec.joints, self.spec.actuators)
 
     def step(self, efforts, duration):
-        world = self.world
-        if not self.started:
-            world.release_holds()
-            if self.spec is plants.ARM:
-                world.set_arm_torque_mode(True)
-            self.started = True
-        if len(efforts):
-            world.set_controls(self.spec.actuators, efforts)
-        world.run_for(duration)
-        positions, velocities = world.joint_state(self.spec.joints)
-        return Reading(world.time, positions, velocities)
+        return self._answer(self.lockstep.step, self.spec.joints, self.spec.actuators, efforts, duration)
 
     def release(self):
-        if self.spec is plants.ARM:
-            self.world.set_arm_torque_mode(False)
-        else:
-            self.world.set_controls(self.spec.actuators, [0.0] * len(self.spec.actuators))
+        self.lockstep.release()
         self.released = True
+
+    @staticmethod
+    def _answer(request, *arguments):
+        try:
+            now, positions, velocities, _ = request(*arguments)
+        except ValueError as refusal:  # what the ControlStep service answers with success = false
+            raise PlantError(str(refusal)) from None
+        return Reading(now, positions, velocities)
 
 
 class PythonController:
@@ -138,6 +137,9 @@ def test_a_stop_request_ends_the_run_at_the_next_tick(world):
 
 def test_a_plant_that_fails_ends_the_run():
     class Broken:
+        def start(self):
+            return Reading(0.0, np.zeros(2), np.zeros(2))
+
         def step(self, efforts, duration):
             raise PlantError('the simulator did not answer within 1 s')
 
@@ -147,6 +149,51 @@ def test_a_plant_that_fails_ends_the_run():
     run = make_run('f', 'cartpole', 100.0, 1.0, 0.0)
     result = ControlLoop(Broken(), PythonController(pd_balance)).run(run, threading.Event())
     assert result.outcome is Outcome.PLANT_ERROR and 'did not answer' in result.message
+
+
+def test_a_run_after_a_run_in_which_the_pole_fell_starts_at_the_seeded_start_and_balances(world):
+    result, _ = run_cartpole(world, lambda state: 0.0, seed=2, duration=10.0)  # lets the pole fall
+    assert result.outcome is Outcome.LIMIT_VIOLATED and 'the pole leaned' in result.message
+    world.run_for(2.0)  # released, the pole falls on
+    (_, fallen), _ = world.joint_state(plants.CARTPOLE_JOINTS)
+    assert abs(fallen) > 0.5
+    firsts = []
+
+    def balancing(state):
+        if not firsts:
+            firsts.append(plants.cartpole_state(state))
+        return pd_balance(state)
+
+    for _ in range(2):  # no reset in between: each run starts from the seeded start
+        firsts.clear()
+        plant = WorldPlant(world, plants.CARTPOLE)
+        result = ControlLoop(plant, PythonController(balancing)).run(
+            make_run('the controller', 'cartpole', 100.0, 10.0, 0.0), threading.Event())
+        assert result.outcome is Outcome.SUCCESSFUL, result.message
+        assert firsts[0] == pytest.approx(controller_scene.initial_cartpole_state(2), abs=1e-9)
+
+
+def test_a_plant_that_cannot_be_put_at_its_start_runs_nothing():
+    class Unresettable:
+        released = False
+
+        def start(self):
+            raise PlantError('a real cart-pole cannot be put back at a start')
+
+        def step(self, efforts, duration):
+            raise AssertionError('stepped a plant that did not start')
+
+        def release(self):
+            self.released = True
+
+    called = []
+    plant = Unresettable()
+    run = make_run('balance()', 'cartpole', 100.0, 1.0, 0.0)
+    result = ControlLoop(plant, PythonController(lambda state: called.append(state) or 0.0)).run(
+        run, threading.Event())
+    assert result.outcome is Outcome.PLANT_ERROR and result.calls == 0 and not called and plant.released
+    assert result.message == ('balance() did not run: the plant could not be put at its start (a real cart-pole '
+                              'cannot be put back at a start)')
 
 
 def test_runs_out_of_range_are_refused_and_limits_only_tighten():

@@ -10,6 +10,10 @@ Units: metres, radians, seconds, newtons. Two plants:
 - **arm**: the UR5e with its joints under torque control (the links' gravity is compensated, as a torque-controlled
   arm's own controller does); the controller's output is the six joint torques [N m] on top of that.
 
+Every run starts from a defined plant state (the simulator's lockstep puts the plant there before the first tick,
+or refuses the run saying why): the cart-pole at the seeded start of the last scene reset, at rest and held until the
+controller takes it over; the arm on its position servos, at rest where it is (ARM_REST_SPEED).
+
 Every tick the control loop sends the controller one flat state vector; `cartpole_state` / `ArmState.unpack` read
 it (the layout's one home, used by the control node that packs it and by the sandbox side that unpacks it).
 """
@@ -49,6 +53,10 @@ ARM_WORKSPACE_MAX = (0.7, 0.1, 0.9)
 # Arm pose where the impedance templates start: the tool points down at (0.0, -0.45, 0.35), over the middle of the
 # table top's front half, elbow up (every joint well inside its range).
 ARM_READY_POSITION = (0.0, -0.45, 0.35)
+# A run of the arm starts with the arm on its position servos and at rest: every joint slower than this [rad/s],
+# reached within ARM_SETTLE_LIMIT_S [s of simulated time] of holding, or the run is refused.
+ARM_REST_SPEED = 0.01
+ARM_SETTLE_LIMIT_S = 2.0
 
 # ------------------------------------------------------------------------------------------------ the loop
 DEFAULT_RATE = 100.0  # [Hz] of simulated time
@@ -151,9 +159,10 @@ def pose_error(goal_pose: np.ndarray, pose: np.ndarray) -> np.ndarray:
     return np.concatenate([goal_pose[:3, 3] - pose[:3, 3], rotation_error(goal_pose[:3, :3], pose[:3, :3])])
 
 
-__all__ = ['ARM', 'ARM_ACTUATORS', 'ARM_JOINTS', 'ARM_JOINT_SPEED_LIMIT', 'ARM_READY_POSITION', 'ARM_TORQUE_LIMITS',
-           'ARM_WORKSPACE_MAX', 'ARM_WORKSPACE_MIN', 'ArmState', 'CARTPOLE', 'CARTPOLE_JOINTS', 'CARTPOLE_STATE_NAMES',
-           'CART_ACTUATOR', 'CART_FORCE_LIMIT', 'CART_JOINT', 'CART_MASS', 'DEFAULT_BUDGET_SHARE', 'DEFAULT_RATE',
-           'EFFORT_STOP_FACTOR', 'INITIAL_STATE_RANGE', 'MAX_DURATION', 'MAX_RATE', 'MIN_RATE', 'PLANTS',
-           'POLE_ANGLE_LIMIT', 'POLE_JOINT', 'POLE_LENGTH', 'POLE_MASS', 'PlantSpec', 'RAIL_CENTRE', 'RAIL_LIMIT',
-           'cartpole_state', 'cartpole_vector', 'default_budget', 'plant', 'pose_error', 'rotation_error']
+__all__ = ['ARM', 'ARM_ACTUATORS', 'ARM_JOINTS', 'ARM_JOINT_SPEED_LIMIT', 'ARM_READY_POSITION', 'ARM_REST_SPEED',
+           'ARM_SETTLE_LIMIT_S', 'ARM_TORQUE_LIMITS', 'ARM_WORKSPACE_MAX', 'ARM_WORKSPACE_MIN', 'ArmState', 'CARTPOLE',
+           'CARTPOLE_JOINTS', 'CARTPOLE_STATE_NAMES', 'CART_ACTUATOR', 'CART_FORCE_LIMIT', 'CART_JOINT', 'CART_MASS',
+           'DEFAULT_BUDGET_SHARE', 'DEFAULT_RATE', 'EFFORT_STOP_FACTOR', 'INITIAL_STATE_RANGE', 'MAX_DURATION',
+           'MAX_RATE', 'MIN_RATE', 'PLANTS', 'POLE_ANGLE_LIMIT', 'POLE_JOINT', 'POLE_LENGTH', 'POLE_MASS', 'PlantSpec',
+           'RAIL_CENTRE', 'RAIL_LIMIT', 'cartpole_state', 'cartpole_vector', 'default_budget', 'plant', 'pose_error',
+           'rotation_error']

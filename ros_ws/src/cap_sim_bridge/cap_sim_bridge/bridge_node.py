@@ -13,11 +13,11 @@ robot's own links are robot_state's (robot_state_node.py). In a scene with a whi
 SIM_GET_INK_SERVICE); serves the scene reset, a
 FollowJointTrajectory action and a GripperCommand action (and in a scene with a mobile base, a FollowJointTrajectory
 action over the base's joints, SIM_FOLLOW_BASE_TRAJECTORY_ACTION); for controllers, lockstep stepping of a plant
-(ControlStep, lockstep.py) and pushes on the tool (PushTool). Like a robot driver it does not listen to /cap/stop:
-the motion owners (cap_control) cancel their goals, and a cancelled trajectory leaves the arm holding where it
-stopped. The physics runs in a thread of its own (never on an executor thread); the callbacks, which may block
-while a motion runs, need a MultiThreadedExecutor with a few threads (main() uses 8). Parameters: SimBridgeConfig
-(cap_sim_bridge.config).
+(ControlStep, lockstep.py; a run's START puts the plant at its defined start first) and pushes on the tool
+(PushTool). Like a robot driver it does not listen to /cap/stop: the motion owners (cap_control) cancel their
+goals, and a cancelled trajectory leaves the arm holding where it stopped. The physics runs in a thread of its own
+(never on an executor thread); the callbacks, which may block while a motion runs, need a MultiThreadedExecutor with
+a few threads (main() uses 8). Parameters: SimBridgeConfig (cap_sim_bridge.config).
 
 Idle: once no goal has run and nothing has moved for `idle_after` seconds (rest.py), /clock, /joint_states, the
 objects and the cameras drop to their idle rates (the cameras resend the frame rendered when the world came to
@@ -370,10 +370,15 @@ class SimBridgeNode(Node):
                 with self.world.lock:
                     response.time = self.world.time
                 return response
-            if request.action != ControlStep.Request.STEP:
+            if request.action == ControlStep.Request.START:
+                now, positions, velocities, applied = self.lockstep.start(request.joint_names,
+                                                                          request.actuator_names)
+                self._last_lockstep_state_wall = -math.inf  # the plant was put back: shown at once
+            elif request.action == ControlStep.Request.STEP:
+                now, positions, velocities, applied = self.lockstep.step(
+                    request.joint_names, request.actuator_names, request.efforts, request.duration)
+            else:
                 raise ValueError(f'unknown action {request.action}')
-            now, positions, velocities, applied = self.lockstep.step(
-                request.joint_names, request.actuator_names, request.efforts, request.duration)
         except ValueError as error:
             response.success = False
             response.message = str(error)

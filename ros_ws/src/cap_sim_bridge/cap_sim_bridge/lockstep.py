@@ -3,11 +3,18 @@
 While a controller steps the world, the simulator's own physics loop pauses and simulated time advances only by
 the controller's requests: every step applies the controller's efforts for exactly one period, however long the
 controller took to compute them, so the loop runs at a fixed rate in simulated time (as fast as possible, or paced
-to the wall clock in real time). The first step takes the plant over: the scene's holds are released (a held pole)
-and, when the arm's actuators are named, the arm goes under torque control. `release()` makes the plant safe: the
-named motors idle, the arm back on its position servos holding where it is; the physics loop then runs freely
-again. A controller that stops asking for `timeout_s` of wall time is released the same way (a crashed node must
-not leave the simulation frozen with its last torques applied).
+to the wall clock in real time).
+
+A run begins with `start()`: the plant is put at its defined start, then taken over, in one request under one lock
+(so nothing moves it in between): the scene's own joints (a cart-pole) back at the seeded start of the last reset,
+at rest and held (World.restart_plant), the arm on its position servos and at rest where it is (within
+ARM_SETTLE_LIMIT_S of simulated time). A plant that cannot be put there is refused with the reason, and nothing is
+taken over: a run never starts from whatever the last run left (a fallen pole, an arm still swinging). Taking over
+releases the scene's holds (a held pole) and, when the arm's actuators are named, puts the arm under torque control;
+a first `step()` without `start()` takes over where the plant is. `release()` makes the plant safe: the named motors
+idle, the arm back on its position servos holding where it is; the physics loop then runs freely again. A controller
+that stops asking for `timeout_s` of wall time is released the same way (a crashed node must not leave the
+simulation frozen with its last torques applied).
 """
 from __future__ import annotations
 
@@ -17,11 +24,13 @@ import time
 from typing import Sequence
 
 import numpy as np
+from cap_controllers import plants
 
 from cap_sim_bridge.pacing import Pacer
-from cap_sim_bridge.world import World
+from cap_sim_bridge.world import ARM_JOINT_NAMES, World
 
 MAX_STEP_DURATION = 1.0  # [s] of simulated time in one request
+SETTLE_STEP = 0.01  # [s] of simulated time between looks at a settling arm
 
 
 class Lockstep:
@@ -34,6 +43,42 @@ class Lockstep:
         self._last_request = 0.0
         self.active = False
         self._dropped = ''  # why the last controller lost the plant for its silence (told at its next step)
+        self.rest_speed = plants.ARM_REST_SPEED  # [rad/s] an arm slower than this is at rest
+        self.settle_limit_s = plants.ARM_SETTLE_LIMIT_S  # [s of simulated time] for the arm to come to rest
+
+    def start(self, joints: Sequence[str], actuators: Sequence[str]) -> tuple[float, np.ndarray, np.ndarray,
+                                                                              np.ndarray]:
+        """Put the plant of `joints` and `actuators` at its defined start and take it over (module docstring);
+        (time, positions and velocities of `joints`, what the actuators apply), as `step` returns. ValueError
+        saying why when it cannot be put there, a controller holds it already, or a name is unknown."""
+        world = self.world
+        with self._lock:
+            if self.active:
+                raise ValueError(f'a controller already drives {", ".join(self._actuators) or "the plant"}')
+            self._dropped = ''  # a new run: the silent one's plant was made safe, and this one starts afresh
+            with world.lock:
+                self._check_names(joints, actuators)
+                own = set(world.scene_joint_names())
+                if own & set(joints):
+                    world.restart_plant()
+                if set(ARM_JOINT_NAMES) & set(joints) or set(world.arm_actuator_names) & set(actuators):
+                    self._settle_arm()
+                self._take_over(actuators)
+                reading = self._read(joints, actuators)
+            self._last_request = time.monotonic()
+        return reading
+
+    def _settle_arm(self) -> None:
+        """The arm on its position servos, holding, at rest; ValueError when it is not within settle_limit_s."""
+        world = self.world
+        world.hold()
+        settled = 0.0
+        while (fastest := float(np.max(np.abs(world.joint_velocities())))) >= self.rest_speed:
+            if settled >= self.settle_limit_s:
+                raise ValueError(f'the arm did not come to rest on its servos within {self.settle_limit_s:g} s '
+                                 f'(a joint still turned at {fastest:.3f} rad/s)')
+            world.run_for(SETTLE_STEP)
+            settled += SETTLE_STEP
 
     def step(self, joints: Sequence[str], actuators: Sequence[str], efforts: Sequence[float],
              duration: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
@@ -50,18 +95,12 @@ class Lockstep:
         with self._lock:
             if self._dropped:
                 # The controller that fell silent must not carry on as if nothing happened; a new run starts with
-                # a step that only reads (no efforts), which clears this.
+                # a step that only reads (no efforts) or a start, which clears this.
                 dropped, self._dropped = self._dropped, ''
                 if efforts.size:
                     raise ValueError(dropped)
             with world.lock:
-                try:
-                    for name in joints:
-                        world.model.joint(name)
-                    for name in actuators:
-                        world.model.actuator(name)
-                except KeyError as error:
-                    raise ValueError(f'unknown joint or actuator: {error}') from None
+                self._check_names(joints, actuators)
                 if not self.active:
                     self._take_over(actuators)
                 elif list(actuators) != self._actuators and actuators:
@@ -69,22 +108,36 @@ class Lockstep:
                 if efforts.size:
                     world.set_controls(actuators, efforts)
                 world.run_for(duration)
-                positions, velocities = world.joint_state(joints)
-                applied = world.controls(actuators) if actuators else np.zeros(0)
-                now = world.time
+                now, positions, velocities, applied = self._read(joints, actuators)
             self._last_request = time.monotonic()
             delay = self._pacer.delay(now)
         if delay > 0:  # real time: the next step waits for the wall clock (outside the lock: a release may come)
             time.sleep(delay)
         return now, positions, velocities, applied
 
+    def _check_names(self, joints: Sequence[str], actuators: Sequence[str]) -> None:
+        try:
+            for name in joints:
+                self.world.model.joint(name)
+            for name in actuators:
+                self.world.model.actuator(name)
+        except KeyError as error:
+            raise ValueError(f'unknown joint or actuator: {error}') from None
+        arm = set(self.world.arm_actuator_names)
+        if set(actuators) & arm and not set(actuators) <= arm:
+            raise ValueError('the arm is stepped on its own')
+
+    def _read(self, joints: Sequence[str], actuators: Sequence[str]) -> tuple[float, np.ndarray, np.ndarray,
+                                                                               np.ndarray]:
+        world = self.world
+        positions, velocities = world.joint_state(joints)
+        applied = world.controls(actuators) if actuators else np.zeros(0)
+        return world.time, positions, velocities, applied
+
     def _take_over(self, actuators: Sequence[str]) -> None:
         world = self.world
         world.release_holds()
-        arm = set(world.arm_actuator_names)
-        if set(actuators) & arm:
-            if not set(actuators) <= arm:
-                raise ValueError('the arm is stepped on its own')
+        if set(actuators) & set(world.arm_actuator_names):
             world.set_arm_torque_mode(True)
         self._actuators = list(actuators)
         self._pacer.restart()

@@ -557,6 +557,15 @@ class World:
                     released.append(name)
             return released
 
+    def restart_plant(self) -> None:
+        """Put the scene's own joints (its plant) back at the start the last reset gave them: at rest and held, as
+        the scene's restart_plant says; ValueError when the scene defines no such start."""
+        with self.lock:
+            if self.scene.restart_plant is None:
+                raise ValueError(f'the scene {self.scene_name!r} cannot put its own joints back at a defined start')
+            self.scene.restart_plant(self.model, self.data, self.seed)
+            mujoco.mj_forward(self.model, self.data)
+
     def push_tool(self, force: Sequence[float], duration: float) -> None:
         """Push the tool centre point with `force` [N, world frame] for `duration` seconds of simulated time from
         now (an external force, as a hand pushing the tool; pushes add up)."""

@@ -1,7 +1,9 @@
-"""Lockstep stepping (the ControlStep service's logic) on the controllers scene: the first step takes the plant over,
-every step advances exactly its duration, and a release or a silent controller leaves the plant safe."""
+"""Lockstep stepping (the ControlStep service's logic) on the controllers scene: a start puts the plant at its defined
+start (or says why it cannot) and takes it over, every step advances exactly its duration, and a release or a silent
+controller leaves the plant safe."""
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -65,3 +67,56 @@ def test_unknown_names_are_refused(world):
 
 def test_the_scene_names_its_own_joints(world):
     assert world.scene_joint_names() == list(plants.CARTPOLE_JOINTS)
+
+
+def test_a_start_puts_a_fallen_cartpole_back_at_its_seeded_start_held_until_taken_over(world):
+    world.reset(4)
+    lockstep = Lockstep(world, 0.0, timeout_s=1.0)
+    lockstep.start(plants.CARTPOLE_JOINTS, [plants.CART_ACTUATOR])
+    lockstep.step(plants.CARTPOLE_JOINTS, [plants.CART_ACTUATOR], [3.0], 1.0)
+    assert lockstep.release()
+    world.run_for(2.0)  # the motor idle, the pole falls
+    (x, theta), _ = world.joint_state(plants.CARTPOLE_JOINTS)
+    assert abs(theta) > 0.5
+    before = world.time
+    now, positions, velocities, applied = lockstep.start(plants.CARTPOLE_JOINTS, [plants.CART_ACTUATOR])
+    start_x, _, start_theta, _ = controller_scene.initial_cartpole_state(4)
+    assert positions.tolist() == pytest.approx([start_x, start_theta], abs=1e-12)
+    assert velocities.tolist() == [0.0, 0.0] and applied.tolist() == [0.0]
+    assert now == before and lockstep.active  # no time passed: the controller sees the start itself
+    with pytest.raises(ValueError, match='already drives'):
+        lockstep.start(plants.CARTPOLE_JOINTS, [plants.CART_ACTUATOR])
+    lockstep.release()
+
+
+def test_a_start_brings_the_arm_to_rest_on_its_servos_or_says_why_it_cannot(world):
+    world.reset(4)
+    lockstep = Lockstep(world, 0.0, timeout_s=1.0)
+    lockstep.start(plants.ARM_JOINTS, plants.ARM_ACTUATORS)
+    lockstep.step(plants.ARM_JOINTS, plants.ARM_ACTUATORS, [20.0, 0.0, 0.0, 0.0, 0.0, 0.0], 0.2)
+    lockstep.release()
+    assert np.max(np.abs(world.joint_velocities())) > 0.1  # released while it swung
+    lockstep.settle_limit_s = 0.0
+    with pytest.raises(ValueError, match='did not come to rest on its servos within 0 s'):
+        lockstep.start(plants.ARM_JOINTS, plants.ARM_ACTUATORS)
+    assert not lockstep.active and not world.arm_torque_mode  # refused: held on its servos, nothing taken over
+    lockstep.settle_limit_s = plants.ARM_SETTLE_LIMIT_S
+    _, _, velocities, _ = lockstep.start(plants.ARM_JOINTS, plants.ARM_ACTUATORS)
+    assert np.max(np.abs(velocities)) < plants.ARM_REST_SPEED and world.arm_torque_mode
+    lockstep.release()
+
+
+def test_a_scene_without_a_defined_start_for_its_joints_refuses_to_start_them(world):
+    world.reset(4)
+    scene = world.scene
+    world.scene = dataclasses.replace(scene, restart_plant=None)
+    try:
+        lockstep = Lockstep(world, 0.0, timeout_s=1.0)
+        with pytest.raises(ValueError, match="the scene 'controllers' cannot put its own joints back"):
+            lockstep.start(plants.CARTPOLE_JOINTS, [plants.CART_ACTUATOR])
+        assert not lockstep.active
+        world.run_for(1.0)
+        (x, theta), _ = world.joint_state(plants.CARTPOLE_JOINTS)
+        assert theta == pytest.approx(controller_scene.initial_cartpole_state(4)[2], abs=1e-6)  # still held
+    finally:
+        world.scene = scene

@@ -5,30 +5,99 @@ Why aiohttp: one small, long-kept asyncio library (aio-libs) serves plain HTTP, 
 response; an ASGI stack would need a server and a framework. Why MJPEG: an <img> shows it with no script, and
 each frame is a JPEG the server encodes once for every browser watching.
 
-Only this host: the server listens on 127.0.0.1, and answers only requests addressed to 127.0.0.1 or localhost at
-its port (a page of another site that rebinds its own name to 127.0.0.1 gets 403), and opens the websocket that
-commands the robot only to the console's own page (Origin checked: browsers let any site open a websocket).
+Only this host, only this page: the server listens on 127.0.0.1 and answers only requests addressed to 127.0.0.1 or
+localhost at its port (a page of another site that rebinds its own name to 127.0.0.1 gets 403). A browser sends
+requests here for any page it shows, another site's too, so every request it marks as made elsewhere is refused
+(`guard`):
+- Sec-Fetch-Site (sent by every current browser): only `same-origin` or `none` (an address typed or bookmarked)
+  pass; a cross-site or same-site request (another port of this host is the same site) passes only as a top-level
+  navigation to the page itself, which shows the page to the person and nothing to the other site.
+- Origin, when sent (always for a websocket: browsers let any site open one): only this console's.
+- Referer, when sent and there is no Sec-Fetch-Site (an older browser): only this console's page.
+- Camera streams (`/stream/<topic>`) need the page token as well: a random secret of this server, put into the page
+  it serves and passed by the page in each stream's URL (`?token=`). A page of another site cannot read the
+  console's page, so it cannot name a stream even from a browser that sends none of the headers above (an `<img>`
+  sends no Origin); this holds whatever a browser sends, which is why streams rely on it and not on headers only.
+A program without those headers (curl, a script) is a local user, as any process on this host that can reach the
+graph is: it may do what the page does, the page token read from the page first.
+
+A request HTTP itself cannot read (a duplicated Host header, a bad method, an oversized line) gets aiohttp's 400 and
+one line in the log, not a traceback: it is the client's mistake, and a flood of them must not flood the log.
 Everything the page needs is in static/ and served from here: no network beyond this host.
 """
 from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import hmac
 import json
+import logging
 import pathlib
+import secrets
+import sys
 import threading
-from typing import Any, Protocol
+from typing import Any, Mapping, Protocol
+from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
+from aiohttp.http_exceptions import HttpProcessingError
+from aiohttp.log import server_logger
 
 from cap_bringup.console.frames import FrameChannel
 from cap_bringup.console.state import ConsoleState
+from cap_lmp.safe_text import one_line
 
 STATIC_DIR = pathlib.Path(__file__).resolve().parent / 'static'
 STATIC_FILES = {'console.js': 'text/javascript', 'console.css': 'text/css'}
 MAX_COMMAND_CHARS = 2000  # a longer one is not forwarded (lmp_node refuses over 1,000 anyway, saying why)
 _STATE_POLL_S = 0.1  # how often each page's writer looks for a new state
 _BOUNDARY = 'cap-frame'
+PAGE_TOKEN_MARK = '{{page_token}}'  # where index.html carries the page token
+_FROM_ELSEWHERE_SITES = ('cross-site', 'same-site')  # Sec-Fetch-Site values of a request another page made
+
+
+def guard(host: str, path: str, headers: Mapping[str, str], hosts: set[str]) -> str:
+    """Why a request to this console is refused, in words; '' when it may pass (see the module docstring). `host`:
+    the request's Host; `hosts`: this console's host:port names."""
+    if host not in hosts:
+        return 'the console answers only at 127.0.0.1 or localhost'
+    site = headers.get('Sec-Fetch-Site')
+    if site in _FROM_ELSEWHERE_SITES and not (path == '/' and headers.get('Sec-Fetch-Mode') == 'navigate'
+                                              and headers.get('Sec-Fetch-Dest') == 'document'):
+        return 'only the console page itself may use the console'
+    if site is not None and site not in _FROM_ELSEWHERE_SITES + ('same-origin', 'none'):
+        return 'only the console page itself may use the console'  # a value no browser sends
+    origin = headers.get('Origin')
+    if origin is not None and origin.removeprefix('http://') not in hosts:
+        return 'only the console page itself may use the console'
+    referer = headers.get('Referer')
+    if site is None and referer is not None and path != '/' and not _own_page(referer, hosts):
+        return 'only the console page itself may use the console'
+    return ''
+
+
+def _own_page(url: str, hosts: set[str]) -> bool:
+    try:
+        parts = urlsplit(url)
+    except ValueError:
+        return False
+    return parts.scheme == 'http' and parts.netloc in hosts
+
+
+class _OneLineLog(logging.LoggerAdapter):
+    """aiohttp's server log, where a request HTTP cannot read is one line (what was wrong), never a traceback; the
+    server's own failures keep theirs."""
+
+    def log(self, level: int, msg: Any, *args: Any, **kwargs: Any) -> None:
+        error = kwargs.get('exc_info')
+        if error is True:
+            error = sys.exc_info()[1]
+        if isinstance(error, HttpProcessingError):
+            kwargs['exc_info'] = None
+            level = min(level, logging.WARNING)  # the client's mistake, not the server's
+            text = msg % args if args else str(msg)
+            msg, args = '%s: a malformed request, answered %s: %s', (text, error.code, one_line(error.message, 300))
+        super().log(level, msg, *args, **kwargs)
 
 
 class ConsoleBackend(Protocol):
@@ -69,6 +138,9 @@ class ConsoleServer:
         # JPEG encoding off the event loop; two workers: one per camera streaming at a time is typical.
         self._pool = concurrent.futures.ThreadPoolExecutor(2, thread_name_prefix='console_jpeg')
         self.frames_sent = 0
+        # The page token (module docstring): new for every server, so an old page's stream addresses die with it.
+        self.page_token = secrets.token_hex(24)
+        self._page = (STATIC_DIR / 'index.html').read_text(encoding='utf-8').replace(PAGE_TOKEN_MARK, self.page_token)
 
     # -------------------------------------------------------------------------------------------- life
     def start(self) -> str:
@@ -94,12 +166,13 @@ class ConsoleServer:
         loop.close()
 
     async def _open(self) -> None:
-        app = web.Application(middlewares=[self._only_this_host], client_max_size=64 * 1024)
+        app = web.Application(middlewares=[self._only_this_page], client_max_size=64 * 1024)
         app.router.add_get('/', self._index)
         app.router.add_get('/static/{name}', self._static)
         app.router.add_get('/api/events', self._events)
         app.router.add_get('/stream/{topic:.+}', self._stream)
-        self._runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
+        self._runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0,
+                                     logger=_OneLineLog(server_logger, {}))
         await self._runner.setup()
         site = web.TCPSite(self._runner, '127.0.0.1', self.port)
         await site.start()
@@ -119,17 +192,15 @@ class ConsoleServer:
         return {f'127.0.0.1:{self.port}', f'localhost:{self.port}'}
 
     @web.middleware
-    async def _only_this_host(self, request: web.Request, handler: Any) -> web.StreamResponse:
-        if request.host not in self._hosts():
-            return web.Response(status=403, text='the console answers only at 127.0.0.1 or localhost\n')
-        origin = request.headers.get('Origin')
-        if origin is not None and origin.removeprefix('http://') not in self._hosts():
-            return web.Response(status=403, text='only the console page itself may use the console\n')
+    async def _only_this_page(self, request: web.Request, handler: Any) -> web.StreamResponse:
+        refusal = guard(request.host, request.path, request.headers, self._hosts())
+        if refusal:
+            return web.Response(status=403, text=refusal + '\n')
         return await handler(request)
 
     # -------------------------------------------------------------------------------------------- page
     async def _index(self, _request: web.Request) -> web.Response:
-        return web.FileResponse(STATIC_DIR / 'index.html', headers=_PAGE_HEADERS)
+        return web.Response(text=self._page, content_type='text/html', headers=_PAGE_HEADERS)
 
     async def _static(self, request: web.Request) -> web.StreamResponse:
         name = request.match_info['name']
@@ -190,6 +261,9 @@ class ConsoleServer:
 
     # -------------------------------------------------------------------------------------------- cameras
     async def _stream(self, request: web.Request) -> web.StreamResponse:
+        if not hmac.compare_digest(request.query.get('token', '').encode(), self.page_token.encode()):
+            return web.Response(status=403, text='a camera stream is shown only on the console page: its address '
+                                                 'carries the page token\n')
         topic = '/' + request.match_info['topic'].strip('/')
         channel = self.backend.watch(topic)
         if channel is None:
@@ -244,4 +318,4 @@ _PAGE_HEADERS = {'Cache-Control': 'no-store', 'X-Frame-Options': 'DENY', 'X-Cont
                                             "frame-ancestors 'none'"}
 
 
-__all__ = ['ConsoleBackend', 'ConsoleServer', 'MAX_COMMAND_CHARS', 'STATIC_DIR']
+__all__ = ['ConsoleBackend', 'ConsoleServer', 'MAX_COMMAND_CHARS', 'PAGE_TOKEN_MARK', 'STATIC_DIR', 'guard']

@@ -1,14 +1,17 @@
 """The control loop of a generated controller: a fixed rate in simulated time, and limits the controller cannot reach.
 
 Two ports, so that the loop runs the same against the simulator, a robot or fakes in tests:
-- `Plant`: `step(efforts, duration)` applies efforts (zero-order hold) and returns the reading `duration` seconds
-  of plant time later (the simulator steps in lockstep with the loop; 0 only reads); `release()` makes it safe.
+- `Plant`: `start()` puts the plant at its defined start, takes it over and returns the reading there (or raises
+  PlantError saying why it cannot: then nothing runs); `step(efforts, duration)` applies efforts (zero-order hold)
+  and returns the reading `duration` seconds of plant time later (the simulator steps in lockstep with the loop; 0
+  only reads); `release()` makes it safe.
 - `Controller`: `call(state, budget_s)` evaluates the generated function on a state vector; returns its output and
   its own CPU time, or raises ControllerFailure (the function's exception, a stop past its budget, no answer).
 
-Every tick: read the plant, check its state against the limits, ask the controller, check the output (a finite
-number per actuator, not absurdly past the actuator's limit), clamp it to the limits, apply it for one period (the
-run, its limits and the checks are cap_control.controller.plan's).
+Every run starts from the plant's defined start (never from what the last run left: a fallen pole would end every
+later run at t = 0). Every tick: read the plant, check its state against the limits, ask the controller, check the
+output (a finite number per actuator, not absurdly past the actuator's limit), clamp it to the limits, apply it for
+one period (the run, its limits and the checks are cap_control.controller.plan's).
 The loop ends when the duration has run, on a stop request, on a limit violation, on a bad output or a failed call
 (an exception, an overrun, no answer), and on a plant that does not answer; in every case the plant is released
 (made safe) before `run` returns. No rclpy here (cap_control.controller.node binds the ports to ROS).
@@ -44,6 +47,8 @@ class PlantError(Exception):
 
 
 class Plant(Protocol):
+    def start(self) -> Reading: ...
+
     def step(self, efforts: Sequence[float], duration: float) -> Reading: ...
 
     def release(self) -> None: ...
@@ -94,7 +99,11 @@ class ControlLoop:
         plant = run.plant
         output = np.zeros(len(plant.actuators))
         try:
-            reading = self.plant.step([], 0.0)
+            try:
+                reading = self.plant.start()
+            except PlantError as error:
+                return self._end(result, Outcome.PLANT_ERROR, f'{run.controller} did not run: the plant could not '
+                                                              f'be put at its start ({error})')
             start = result.start_time = reading.time
             for tick in range(ticks + 1):
                 elapsed = reading.time - start

@@ -4,9 +4,12 @@ The loop is cap_control.controller.executor's, the run's checks and limits cap_c
 binds the loop's ports to ROS: the plant to the simulator's ControlStep service (lockstep stepping: the plant
 advances one period per request, so the rate holds in simulated time), the controller to lmp_node's CallController
 service (the function runs in lmp_node's sandbox process). The node owns the limits: the generated program cannot
-reach them. /cap/stop or a cancel ends the run at the next tick; every end releases the plant (made safe).
-GetPlantState answers a plant's state now, from /joint_states, packed as a controller would see it. Parameters:
-ControllerNodeConfig (cap_control.controller.plan), overridden in config/controller.yaml.
+reach them. Every run starts with ControlStep's START: the simulator puts the plant at its defined start (the
+cart-pole at its seeded start, held; the arm on its servos, at rest) before the controller is called once, or the
+run is refused with the simulator's reason (PLANT_ERROR). /cap/stop or a cancel ends the run at the next tick; every
+end releases the plant (made safe). GetPlantState answers a plant's state now, from /joint_states, packed as a
+controller would see it. Parameters: ControllerNodeConfig (cap_control.controller.plan), overridden in
+config/controller.yaml.
 
 Threading: the action's execute callback blocks for the whole run, so it needs a MultiThreadedExecutor (main()
 spins one of 4 threads, cap_control.skill_node.spin_node); the per-tick requests are sent asynchronously and awaited
@@ -66,17 +69,25 @@ class RosPlant:
     def __init__(self, client, spec: plants.PlantSpec, timeout_s: float) -> None:
         self._client, self._spec, self._timeout_s = client, spec, timeout_s
 
+    def start(self) -> Reading:
+        request = ControlStep.Request(action=ControlStep.Request.START, joint_names=list(self._spec.joints),
+                                      actuator_names=list(self._spec.actuators))
+        return self._reading(self._call(request, ''))  # the refusal is the plant's reason
+
     def step(self, efforts: Sequence[float], duration: float) -> Reading:
         request = ControlStep.Request(action=ControlStep.Request.STEP, joint_names=list(self._spec.joints),
                                       actuator_names=list(self._spec.actuators), efforts=list(efforts),
                                       duration=float(duration))
-        response = self._call(request)
-        return Reading(response.time, np.asarray(response.positions), np.asarray(response.velocities))
+        return self._reading(self._call(request, 'the plant refused the step'))
 
     def release(self) -> None:
-        self._call(ControlStep.Request(action=ControlStep.Request.RELEASE))
+        self._call(ControlStep.Request(action=ControlStep.Request.RELEASE), 'the plant refused the release')
 
-    def _call(self, request):
+    @staticmethod
+    def _reading(response) -> Reading:
+        return Reading(response.time, np.asarray(response.positions), np.asarray(response.velocities))
+
+    def _call(self, request, refused: str):
         name = self._client.srv_name
         if not self._client.service_is_ready() and not self._client.wait_for_service(timeout_sec=self._timeout_s):
             raise PlantError(f'the plant ({name}) is not running')
@@ -84,7 +95,7 @@ class RosPlant:
         if response is None:
             raise PlantError(f'the plant ({name}) did not answer within {self._timeout_s:g} s')
         if not response.success:
-            raise PlantError(f'the plant refused the step: {response.message}')
+            raise PlantError(f'{refused}: {response.message}' if refused else response.message)
         return response
 
 

@@ -60,6 +60,10 @@ class SceneSpec:
     # initialize(model, data, seed): the scene's own seeded start state after the robot and objects are placed
     # (e.g. a cart-pole's initial lean); None: nothing.
     initialize: Callable[[mujoco.MjModel, mujoco.MjData, int], None] | None = None
+    # restart_plant(model, data, seed): puts the scene's own joints (a plant a controller drives) back at the start
+    # a reset with `seed` gives them, at rest, mid-episode (each controller run starts there); None: the scene's
+    # joints have no such start, and a run of them is refused.
+    restart_plant: Callable[[mujoco.MjModel, mujoco.MjData, int], None] | None = None
 
 
 def robot_include() -> dict[str, bytes]:

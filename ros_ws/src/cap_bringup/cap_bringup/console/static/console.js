@@ -19,8 +19,12 @@ function send(request) {
   if (socket && socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify(request));
 }
 
+// The server's secret of this page: a camera stream is served only to an address that carries it, which a page of
+// another site cannot read.
+const pageToken = document.querySelector('meta[name="cap-page-token"]').content;
+
 function streamUrl(topic) {
-  return '/stream' + topic.split('/').map(encodeURIComponent).join('/');
+  return '/stream' + topic.split('/').map(encodeURIComponent).join('/') + '?token=' + encodeURIComponent(pageToken);
 }
 
 function renderCameras(streams) {
