@@ -71,7 +71,6 @@ ATTEMPTS_BY_ERROR = {
         'bound format kept for later': "fmt = '{0.__class__}'.format\nfmt(1)",
         'format field built from chr()': "f = '{0.' + chr(95) * 2 + 'class' + chr(95) * 2 + '}'\nf.format(1)",
         'C-level infinite iterator': 'all(iter(int, 1))',
-        'big-int construction from bytes': "x = int.from_bytes(b'ab' * 500000, 'big')",
     },
     ResourceLimitError: {
         'huge power': 'x = 10 ** 10 ** 10',
@@ -88,6 +87,7 @@ ATTEMPTS_BY_ERROR = {
         'percent-format width': "x = '%10000000000d' % 1",
         'str.replace blow-up': "x = ('a' * 10 ** 6).replace('', 'b' * 1000)",
         'int.to_bytes allocation': "x = (1).to_bytes(10 ** 10, 'big')",
+        'big-int construction from bytes': "x = int.from_bytes(b'ab' * 500000, 'big')",
         'Shapely buffer resolution': 'p = Point(0, 0).buffer(1, 10 ** 7)',
         'quadratic sum of lists': 'x = sum([[0] * 10 ** 6] * 10 ** 6, [])',
         'list doubling by extend': 'x = [1] * 1000\nwhile True:\n    x.extend(x)',

@@ -30,7 +30,8 @@ class LmpNodeConfig:
                             'cap_lmp_ros.domains.registry.domain_names()).')
     sandbox_process: bool = parameter(True, 'Run generated programs in a sandbox process of their own (a crash or a '
                                       'stuck C call then costs the session, not the node); false: in this process '
-                                      '(faster to start, for debugging).')
+                                      '(faster to start, for debugging; a single long C call then cannot be '
+                                      'stopped, and the node warns at start-up).')
     stall_limit_s: float = parameter(10.0, 'With sandbox_process: kill the sandbox process when one operation holds '
                                      'it this long without a pause [s].')
     jail: str = parameter('required', 'With sandbox_process: the kernel jail of the sandbox process (no file writes, '

@@ -61,7 +61,7 @@ from cap_lmp.local_model import INSTALL_HINT
 from cap_lmp.local_server import LocalModelClient, LocalModelServer, ServerSettings, server_binary, warm_up
 from cap_lmp.outcome import Outcome
 from cap_lmp.safe_text import terminal_text, wire_text
-from cap_lmp.sandbox import SandboxLimits
+from cap_lmp.sandbox import IN_PROCESS_WARNING, SandboxLimits
 from cap_lmp.wire import MAX_CODE_CHARS
 from cap_lmp_ros.command_queue import CommandQueue, Job
 from cap_lmp_ros.config import RUNTIME_PARAMETERS, LmpNodeConfig
@@ -217,6 +217,9 @@ class LmpNode(Node):
         # /cap/status holds an event from the start: a client that receives its history knows that this node has
         # discovered it, and with it the client's reply readers (cap send waits for that, see cli._ReplyPath).
         self._publish_model_state(ready)
+        if not config.sandbox_process:  # no bound on a single C call: said in the log and on /cap/status
+            self.get_logger().warning(IN_PROCESS_WARNING)
+            self._publish_model_state(IN_PROCESS_WARNING)
 
     def _start_model(self) -> None:
         assert self.model_server is not None

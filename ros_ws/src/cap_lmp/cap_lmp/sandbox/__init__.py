@@ -26,19 +26,33 @@ What a program goes through
    bounded by the array size. Every argument of an allow-listed NumPy function is checked: a dtype of objects or
    strings is refused wherever it is passed (also positionally), object arrays are refused as arguments and as
    results (an array of integers too large for int64 would make a sum or product unbounded), lists count with the
-   size they convert to, and all array-like arguments together must broadcast within the element limit.
-   `np.repeat` counts the copies it makes (repeating a zero-width row 10 ** 12 times is 10 ** 12 steps), and
-   `np.percentile` / `np.median` the results per quantile. `sorted`, `list.sort`, `min` and `max` bound the
-   element comparisons of list and tuple items (aliased long lists compare element by element).
-3. **Names**: the program sees restricted builtins (no `type`/`object`, one-argument `iter`, bounded `range`, `sum`
-   as a checked Python loop, `map`/`filter`/`zip`/`enumerate`/`reversed` as Python generators whose frames the
-   watchdog sees, so an endless or deeply nested chain meets the time or depth limit, and an `__import__` for
-   NumPy's C code, which imports its own submodules through the caller's builtins; the program cannot name it),
-   a NumPy namespace `np` of allow-listed functions with size rules (they read arguments by name whether passed
-   by position or keyword), the Shapely constructors and affinity functions (coordinates of geometries inside
-   lists count), and the injected robot API and LMPs. Every injected callable is wrapped in a plain function, so
-   attribute traversal from it finds nothing of the host. A program may rebind these names within its own run;
-   the engine puts the robot API, LMP, `np` and Shapely names back before every command.
+   size they convert to (estimated from their nesting, never by converting them), and all array-like arguments
+   together must broadcast within the element limit. Size rules read a call's arguments by meaning: bound to
+   parameter names the way the function binds them (its signature, binding.py; positional and keyword alike,
+   defaults filled in), flags by their truth value as NumPy tests them (`replace=0` is no replacement), and they
+   bound the result as well as the inputs: creation, `linspace`/`arange` lengths, `outer`/`kron`/`meshgrid`/
+   `tile`/`repeat`, `np.random.*` sizes and `choice` without replacement (which permutes its population), and
+   `np.linalg.svd`'s factors (with `full_matrices` a 1 x n input has an n x n V). Cubic linear algebra (`inv`,
+   `det`, `solve`, `pinv`, `eig`, `svd`, and `norm` of order 2, -2 or 'nuc' of a matrix) takes at most 250,000
+   elements. `np.repeat` counts the copies it makes (repeating a zero-width row 10 ** 12 times is 10 ** 12 steps),
+   `np.percentile` / `np.median` the results per quantile, and `np.roll` takes at most 64 shifts (it loops over
+   them in Python, out of the tracer's sight); a ufunc's `signature=` is refused. `sorted`, `list.sort`, `min`
+   and `max` bound the element comparisons of list and tuple items (aliased long lists compare element by element).
+   Integers stay within `max_int_bits` however a program makes them: integer literals (checked in step 1),
+   `int()` of text (at most log2(base) bits per character; a power-of-two base has no CPython digit limit),
+   `int.from_bytes` on the class or a value, `+`, `-`, `*`, `**`, `<<` and `pow`; and the operations whose cost
+   grows faster than their operands (`*`, `//`, `%`, `divmod`, `pow`, `round`) refuse operands beyond the limit
+   wherever they came from (the robot API). At that size each is a matter of milliseconds, decimal text included.
+3. **Names**: the program sees restricted builtins (no `type`/`object`, one-argument `iter`, bounded `range`, `sum` as
+   a checked Python loop, `int` as a checked constructor that is still the type for `isinstance`, `case int(x):` and
+   `dtype=int`, checked `divmod`, `pow` and `round`, `map`/`filter`/`zip`/`enumerate`/`reversed` as Python generators
+   whose frames the watchdog sees, so an endless or deeply nested chain meets the time or depth limit, and an
+   `__import__` for NumPy's C code, which imports its own submodules through the caller's builtins; the program cannot
+   name it), a NumPy namespace `np` of allow-listed functions with size rules (step 2), the Shapely constructors and
+   affinity functions (coordinates of geometries inside lists count), and the injected robot API and LMPs. Every
+   injected callable is wrapped in a plain function, so attribute traversal from it finds nothing of the host. A
+   program may rebind these names within its own run; the engine puts the robot API, LMP, `np` and Shapely names back
+   before every command.
 4. **Watchdog**: while a program runs, a trace function on the calling thread (sys.settrace) checks, at every line
    and every call of sandboxed code (the helpers included): the wall-clock limit (time spent waiting for the model
    is excluded), the cancel event, the nesting depth of sandboxed calls, and every 5 ms the growth of the process'
@@ -69,7 +83,9 @@ What it guarantees
 
 What it does not guarantee (in process; IsolatedEngine, which lmp_node uses, runs the sandbox in a process of
 its own and bounds the first three from outside: a dead process costs the session, and a program that has not
-ended by `time_limit_s` + 0.5 s, whatever it does, is killed, see isolated_engine.py)
+ended by `time_limit_s` + 0.5 s, whatever it does, is killed, see isolated_engine.py; lmp_node runs programs in
+its own process only with `sandbox_process: false`, for debugging, and then says at start-up, as a warning in the
+log and on /cap/status, that single C calls are not bounded: IN_PROCESS_WARNING)
 - It is not an OS boundary: a bug in CPython, NumPy or Shapely reachable with allowed values is not contained.
   Known instances: C recursion over a deeply nested value built by a loop (`t = (t,)` 300,000 times, then
   `hash(t)`, `str(t)` or `t == t`) overflows the C stack and kills the process.
@@ -113,6 +129,12 @@ from cap_lmp.sandbox.names import (MAX_TEXT, NUMPY_CONSTANTS, NUMPY_FUNCTIONS, N
                                    program_print)
 from cap_lmp.sandbox.rewrite import GUARD_PREFIX, rewrite
 from cap_lmp.sandbox.watchdog import StopSignal, Watchdog, resident_bytes
+
+# What an engine running programs in its host's own process says at start-up, loudly (lmp_node with
+# sandbox_process: false): only a sandbox process is bounded from outside (isolated_engine.py).
+IN_PROCESS_WARNING = ('warning: generated programs run in this process (sandbox_process: false), where a single long '
+                      'C call (NumPy, Shapely, a big integer) cannot be interrupted and memory is only sampled: the '
+                      'time limit, /cap/stop and the memory limit are not guaranteed. Use it for debugging only.')
 
 # The guard helpers run as sandboxed code: the tracer watches them too.
 _GUARDS_FILENAME = SANDBOX_FILE_PREFIX + ':guards>'
@@ -185,6 +207,7 @@ class Sandbox:
                      sum=self._guards['guarded_sum'], pow=self._guards['guarded_pow'],
                      round=self._guards['guarded_round'], sorted=self._guards['guarded_sorted'],
                      min=self._guards['guarded_min'], max=self._guards['guarded_max'],
+                     divmod=self._guards['guarded_divmod'], int=self._guards['checked_int'],
                      print=self.wrap_callable(program_print))
         names['__import__'] = internal_import
         return names
@@ -195,9 +218,9 @@ class Sandbox:
         wrap = self._guards['wrap_numpy_function']
         members: dict[str, Any] = {name: wrap(name, getattr(numpy, name)) for name in NUMPY_FUNCTIONS}
         members.update({name: getattr(numpy, name) for name in NUMPY_CONSTANTS})
-        members['linalg'] = SafeNamespace(**{name: wrap(name, getattr(numpy.linalg, name))
+        members['linalg'] = SafeNamespace(**{name: wrap(f'linalg.{name}', getattr(numpy.linalg, name))
                                              for name in NUMPY_LINALG})
-        members['random'] = SafeNamespace(**{name: wrap(name, getattr(numpy.random, name))
+        members['random'] = SafeNamespace(**{name: wrap(f'random.{name}', getattr(numpy.random, name))
                                              for name in NUMPY_RANDOM})
         return SafeNamespace(**members)
 
@@ -300,6 +323,7 @@ class Sandbox:
             watchdog.check()  # raises again a stop that was swallowed during the run
 
 
-__all__ = ['FORBIDDEN_ATTRIBUTES', 'FORBIDDEN_ATTRIBUTE_PREFIXES', 'FORBIDDEN_NAMES', 'MAX_TEXT', 'SANDBOX_FILE_PREFIX',
+__all__ = ['FORBIDDEN_ATTRIBUTES', 'FORBIDDEN_ATTRIBUTE_PREFIXES', 'FORBIDDEN_NAMES', 'IN_PROCESS_WARNING', 'MAX_TEXT',
+           'SANDBOX_FILE_PREFIX',
            'CompiledProgram', 'SafeNamespace', 'Sandbox', 'SandboxLimits', 'Watchdog', 'bounded_exception_text',
            'bounded_text', 'check_code', 'rewrite']

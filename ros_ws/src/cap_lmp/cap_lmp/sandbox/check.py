@@ -51,7 +51,11 @@ class _Checker(ast.NodeVisitor):
         super().generic_visit(node)
 
     def visit_Constant(self, node: ast.Constant) -> None:
-        pass  # (the base class' visit_Constant is a slow compatibility shim)
+        # (the base class' visit_Constant is a slow compatibility shim)
+        value = node.value
+        if type(value) is int and value.bit_length() > self.limits.max_int_bits:  # a hexadecimal literal
+            self.refuse(node, f'an integer literal of {value.bit_length():,} bits exceeds the limit of '
+                              f'{self.limits.max_int_bits:,} bits')
 
     def visit_Name(self, node: ast.Name) -> None:
         if node.id.startswith('__'):

@@ -24,6 +24,8 @@ import numpy
 import shapely
 from shapely.geometry.base import BaseGeometry
 
+from cap_lmp.sandbox.binding import binder
+
 LIMITS = None  # bound by the sandbox
 ResourceLimitError = None  # bound by the sandbox
 OperationRefused = None  # bound by the sandbox
@@ -112,8 +114,8 @@ def _check_broadcast(a, b, what):
     if isinstance(a, _ARRAYS) or isinstance(b, _ARRAYS):
         if getattr(a, 'dtype', None) == object or getattr(b, 'dtype', None) == object:  # noqa: E721 (a dtype)
             forbid(f'{what} on an object array is not available in the sandbox (its elements grow without bound)')
-        shape_a = numpy.shape(a) if isinstance(a, (_ARRAYS, list, tuple)) else ()
-        shape_b = numpy.shape(b) if isinstance(b, (_ARRAYS, list, tuple)) else ()
+        # Shapes estimated, not converted: numpy.shape of a nested list builds the array it would check.
+        shape_a, shape_b = _shape_estimate(a), _shape_estimate(b)
         try:
             shape = numpy.broadcast_shapes(shape_a, shape_b)
         except ValueError:
@@ -123,6 +125,18 @@ def _check_broadcast(a, b, what):
 
 # ---------------------------------------------------------------------------------------------------- operators
 _INTEGERS = (int, numpy.integer)
+# Operands of these types alone make a result of one element: only integer sizes need a check. The operators below
+# decide that in their first line, with no further call: each line of this file costs a trace event.
+_SCALARS = frozenset({int, float, bool, complex, numpy.float64, numpy.float32, numpy.int64, numpy.int32,
+                      numpy.bool_})
+
+
+# Integers: every way a program makes one (literals, int(), int.from_bytes, +, -, *, **, <<, pow) keeps it within
+# LIMITS.max_int_bits, and the operations whose cost grows faster than their operands' size (*, //, %, divmod, pow,
+# round) refuse operands beyond it, wherever they came from. NumPy integers are fixed-width; bool is an int.
+def check_int_operands(a, b, extra_bits, what):
+    """Both integers within the limit, and a result of at most the larger one plus `extra_bits` bits."""
+    check_int_bits(max(a.bit_length(), b.bit_length()) + extra_bits, what)
 
 
 def _repeat_check(a, b, what):
@@ -133,28 +147,32 @@ def _repeat_check(a, b, what):
         check_length(len(b) * max(operator.index(a), 0), what)
 
 
-def op_mult(a, b):
-    if type(a) is int and type(b) is int:
+def _mult_check(a, b):
+    if isinstance(a, int) and isinstance(b, int):
         check_int_bits(a.bit_length() + b.bit_length(), 'this multiplication')
     else:
         _repeat_check(a, b, 'this repetition')
         _check_broadcast(a, b, 'this array product')
+
+
+def op_mult(a, b):
+    if type(a) not in _SCALARS or type(b) not in _SCALARS or isinstance(a, int) and isinstance(b, int):
+        _mult_check(a, b)
     return a * b
 
 
 def op_imult(a, b):
-    if type(a) is int and type(b) is int:
-        check_int_bits(a.bit_length() + b.bit_length(), 'this multiplication')
-    else:
-        _repeat_check(a, b, 'this repetition')
-        _check_broadcast(a, b, 'this array product')
+    if type(a) not in _SCALARS or type(b) not in _SCALARS or isinstance(a, int) and isinstance(b, int):
+        _mult_check(a, b)
     a *= b
     return a
 
 
 def _pow_check(a, b):
-    if isinstance(a, int) and isinstance(b, int) and b > 0 and abs(a) > 1:
-        check_int_bits(int(b * math.log2(abs(a))) + 1, 'this power')
+    if isinstance(a, int) and isinstance(b, int):
+        check_int_bits(a.bit_length(), 'this power')
+        if b > 0 and abs(a) > 1:
+            check_int_bits(int(b * math.log2(abs(a))) + 1, 'this power')
     _check_broadcast(a, b, 'this array power')
 
 
@@ -176,18 +194,32 @@ def guarded_pow(base, exp, mod=None):
     if mod is None:
         _pow_check(base, exp)
         return pow(base, exp)
-    if isinstance(exp, int) and isinstance(mod, int) and \
-            max(abs(exp).bit_length(), abs(mod).bit_length()) > _MAX_MODULAR_BITS:
-        refuse(f'pow() with a modulus or exponent over {_MAX_MODULAR_BITS} bits is not allowed in the sandbox')
+    if isinstance(exp, int) and isinstance(mod, int):
+        if max(abs(exp).bit_length(), abs(mod).bit_length()) > _MAX_MODULAR_BITS:
+            refuse(f'pow() with a modulus or exponent over {_MAX_MODULAR_BITS} bits is not allowed in the sandbox')
+        if isinstance(base, int):
+            check_int_bits(base.bit_length(), 'pow()')
     return pow(base, exp, mod)
 
 
+def _index_or_none(value):
+    """The integer value Python would use for `value` as a count or index (NumPy integers too), or None."""
+    try:
+        return operator.index(value)
+    except TypeError:
+        return None
+
+
 def guarded_round(number, ndigits=None):
-    """round(); an integer rounded to -n digits computes 10 ** n first, so n is bounded."""
+    """round(); an integer rounded to -n digits computes 10 ** n first, so n is bounded (also as a NumPy integer,
+    which round() reads through its index)."""
     if ndigits is None:
         return round(number)
-    if isinstance(ndigits, int) and abs(ndigits) > LIMITS.max_format_width:
-        refuse(f'round() to {ndigits} digits is not allowed in the sandbox')
+    digits = _index_or_none(ndigits)
+    if digits is not None and abs(digits) > LIMITS.max_format_width:
+        refuse(f'round() to {digits} digits is not allowed in the sandbox')
+    if isinstance(number, int):
+        check_int_bits(number.bit_length(), 'round()')
     return round(number, ndigits)
 
 
@@ -208,15 +240,24 @@ def op_ilshift(a, b):
     return a
 
 
-def _concat_check(a, b):
-    if isinstance(a, _SEQUENCES) and isinstance(b, _SEQUENCES):
+def _sum_check(a, b, what):
+    if isinstance(a, int) and isinstance(b, int):
+        check_int_operands(a, b, 1, f'this integer {what}')
+    elif isinstance(a, _SEQUENCES) and isinstance(b, _SEQUENCES):
         check_length(len(a) + len(b), 'this concatenation')
     else:
-        _check_broadcast(a, b, 'this array sum')
+        _check_broadcast(a, b, f'this array {what}')
+
+
+def _large_ints(a, b):
+    """Both are integers, one of them near the limit (the rest of a check is skipped for the usual small ones)."""
+    return isinstance(a, int) and isinstance(b, int) and \
+        max(a.bit_length(), b.bit_length()) >= LIMITS.max_int_bits - 1
 
 
 def op_add(a, b):
-    _concat_check(a, b)
+    if type(a) not in _SCALARS or type(b) not in _SCALARS or _large_ints(a, b):
+        _sum_check(a, b, 'sum')
     return a + b
 
 
@@ -224,9 +265,50 @@ def op_iadd(a, b):
     if type(a) is list and not isinstance(b, _SEQUENCES):
         checked_extend(a, b, 'this in-place concatenation')
         return a
-    _concat_check(a, b)
+    if type(a) not in _SCALARS or type(b) not in _SCALARS or _large_ints(a, b):
+        _sum_check(a, b, 'sum')
     a += b
     return a
+
+
+def op_sub(a, b):
+    if type(a) not in _SCALARS or type(b) not in _SCALARS or _large_ints(a, b):
+        _sum_check(a, b, 'difference')
+    return a - b
+
+
+def op_isub(a, b):
+    if type(a) not in _SCALARS or type(b) not in _SCALARS or _large_ints(a, b):
+        _sum_check(a, b, 'difference')
+    a -= b
+    return a
+
+
+def _quotient_check(a, b, what):
+    if isinstance(a, int) and isinstance(b, int):
+        check_int_operands(a, b, 0, f'this integer {what}')
+    else:
+        _check_broadcast(a, b, f'this array {what}')
+
+
+def op_floordiv(a, b):
+    if type(a) not in _SCALARS or type(b) not in _SCALARS or _large_ints(a, b):
+        _quotient_check(a, b, 'quotient')
+    return a // b
+
+
+def op_ifloordiv(a, b):
+    if type(a) not in _SCALARS or type(b) not in _SCALARS or _large_ints(a, b):
+        _quotient_check(a, b, 'quotient')
+    a //= b
+    return a
+
+
+def guarded_divmod(a, b):
+    """divmod(): quadratic in its integers' size, like // and %."""
+    if type(a) not in _SCALARS or type(b) not in _SCALARS or _large_ints(a, b):
+        _quotient_check(a, b, 'divmod')
+    return divmod(a, b)
 
 
 _PERCENT_FIELD = re.compile(r'%(?:\([^)]*\))?[-#0 +]*(\*|\d+)?(?:\.(\*|\d+))?')
@@ -286,21 +368,23 @@ def _check_percent_output(template, values):
     check_length(len(template) + extra + padding, "this '%' formatting")
 
 
-def op_mod(a, b):
+def _mod_check(a, b):
     if isinstance(a, (str, bytes, bytearray)):
         _check_percent_format(a)
         _check_percent_output(a, b)
     else:
-        _check_broadcast(a, b, 'this array remainder')
+        _quotient_check(a, b, 'remainder')
+
+
+def op_mod(a, b):
+    if type(a) not in _SCALARS or type(b) not in _SCALARS or _large_ints(a, b):
+        _mod_check(a, b)
     return a % b
 
 
 def op_imod(a, b):
-    if isinstance(a, (str, bytes, bytearray)):
-        _check_percent_format(a)
-        _check_percent_output(a, b)
-    else:
-        _check_broadcast(a, b, 'this array remainder')
+    if type(a) not in _SCALARS or type(b) not in _SCALARS or _large_ints(a, b):
+        _mod_check(a, b)
     a %= b
     return a
 
@@ -312,12 +396,8 @@ def _make_array_op(function, name):
     return checked
 
 
-op_sub = _make_array_op(operator.sub, 'difference')
-op_isub = _make_array_op(operator.isub, 'difference')
 op_truediv = _make_array_op(operator.truediv, 'quotient')
 op_itruediv = _make_array_op(operator.itruediv, 'quotient')
-op_floordiv = _make_array_op(operator.floordiv, 'quotient')
-op_ifloordiv = _make_array_op(operator.ifloordiv, 'quotient')
 op_rshift = _make_array_op(operator.rshift, 'shift')
 op_irshift = _make_array_op(operator.irshift, 'shift')
 op_and = _make_array_op(operator.and_, 'bitwise and')
@@ -335,16 +415,20 @@ cmp_ge = _make_array_op(operator.ge, 'comparison')
 
 
 def _matmul_check(a, b):
-    """Elements of a @ b (batch dimensions broadcast) or np.dot(a, b), whichever is larger."""
-    if isinstance(a, _ARRAYS) and isinstance(b, _ARRAYS) and a.ndim and b.ndim:
-        dot = math.prod(a.shape[:-1]) * (math.prod(b.shape[:-2]) * b.shape[-1] if b.ndim > 1 else 1)
+    """Elements of a @ b (batch dimensions broadcast) or np.dot(a, b), whichever is larger; lists count with the
+    shape they convert to (estimated, not converted)."""
+    shape_a, shape_b = _shape_estimate(a), _shape_estimate(b)
+    check_elements(math.prod(shape_a), 'this matrix product')
+    check_elements(math.prod(shape_b), 'this matrix product')
+    if shape_a and shape_b:
+        dot = math.prod(shape_a[:-1]) * (math.prod(shape_b[:-2]) * shape_b[-1] if len(shape_b) > 1 else 1)
         matmul = 0
-        if a.ndim > 1 and b.ndim > 1:
+        if len(shape_a) > 1 and len(shape_b) > 1:
             try:
-                batch = math.prod(numpy.broadcast_shapes(a.shape[:-2], b.shape[:-2]))
+                batch = math.prod(numpy.broadcast_shapes(shape_a[:-2], shape_b[:-2]))
             except ValueError:
                 batch = 0  # numpy raises its own error
-            matmul = batch * a.shape[-2] * b.shape[-1]
+            matmul = batch * shape_a[-2] * shape_b[-1]
         check_elements(max(dot, matmul), 'this matrix product')
 
 
@@ -387,6 +471,57 @@ def guarded_iter(*args):
     if len(args) != 1:
         forbid('iter() takes exactly one argument in the sandbox (iter(callable, sentinel) is not available)')
     return iter(args[0])
+
+
+# int() and int.from_bytes: the size of the integer is known from the text or bytes before it is made (a string in a
+# power-of-two base converts in linear time without CPython's digit limit: int('1' * 10 ** 6, 2) is a million bits).
+def _text_bits(text, base):
+    """An upper bound of the bits of int(text, base): at most log2(base) bits per character (base 0 reads a prefix:
+    hexadecimal is the most per character)."""
+    base = _index_or_none(base)
+    if base is None or not 0 <= base <= 36 or base == 1:
+        return 0  # int() raises its own error
+    return math.ceil(len(text) * math.log2(base or 16))
+
+
+class _IntegerType(type):
+    """The metaclass of the program's `int`: isinstance and issubclass answer for the real int."""
+
+    def __instancecheck__(cls, value):
+        return isinstance(value, int)
+
+    def __subclasscheck__(cls, kind):
+        return issubclass(kind, int)
+
+
+class checked_int(int, metaclass=_IntegerType):
+    """`int` as a program sees it: a checked constructor whose values are real ints. It is a subclass so that
+    `case int(x):`, `isinstance(x, int)`, `int | None` and `int.bit_length` keep their meaning, and NumPy reads
+    `dtype=int` as it reads the real int."""
+
+    dtype = numpy.dtype(int)
+
+    def __new__(cls, *args, **kwargs):
+        if args and isinstance(args[0], (str, bytes, bytearray)):
+            base = args[1] if len(args) > 1 else kwargs.get('base', 10)
+            check_int_bits(_text_bits(args[0], base), 'int() of this text')
+        return int(*args, **kwargs)
+
+
+checked_int.__name__ = checked_int.__qualname__ = 'int'
+checked_int.__module__ = 'builtins'
+
+
+def _checked_from_bytes(from_bytes):
+    """int.from_bytes, called on the class or on a value: the integer has eight bits per byte."""
+    def checked(bytes, byteorder='big', *, signed=False):
+        size = _len_or_none(bytes)
+        if size is None:
+            bytes = list(bytes)
+            size = len(bytes)
+        check_int_bits(8 * size, 'int.from_bytes')
+        return from_bytes(bytes, byteorder, signed=signed)
+    return checked
 
 
 # map, filter, zip, enumerate and reversed as Python generators: their frames are traced, so an endless chain
@@ -587,10 +722,10 @@ def _string_method(obj, name):
         return replace
     if name == 'join':
         def join(iterable):
-            parts = list(iterable)
-            total = len(obj) * max(len(parts) - 1, 0)
-            for part in parts:
-                total += _len_or_none(part) or 0
+            parts = iterable if isinstance(iterable, (list, tuple)) else list(iterable)
+            # the parts' lengths summed in C (a traced loop over a million parts would spend the time limit);
+            # what is not text makes join raise its own TypeError
+            total = len(obj) * max(len(parts) - 1, 0) + sum(_text_lengths(parts))
             check_length(total, 'str.join')
             return method(parts)
         return join
@@ -637,15 +772,15 @@ def _array_method(obj, name):
         def converted(*args, **kwargs):
             for value in args[:1] + tuple(kwargs.get(key) for key in ('dtype', 'type')):
                 check_dtype(value, f'ndarray.{name}')
-            if name == 'view' and kwargs.get('type') is not None:
+            if name == 'view' and (len(args) > 1 or kwargs.get('type') is not None):  # view(dtype, type)
                 forbid('ndarray.view(type=...) is not available in the sandbox')
             return method(*args, **kwargs)
         return converted
-    if name in ('dot', 'outer'):
-        def product(other, *rest, **kwargs):
-            _matmul_check(obj, numpy.asarray(other))
-            return method(other, *rest, **kwargs)
-        return product
+    if name == 'dot':
+        def dot(b, out=None):
+            _matmul_check(obj, b)
+            return method(b, out)
+        return dot
     return method
 
 
@@ -663,8 +798,12 @@ def _segment_count(value):
 def _geometry_method(obj, name):
     method = getattr(obj, name)
     if name in ('buffer', 'offset_curve', 'parallel_offset'):
-        def buffered(distance, *args, **kwargs):
-            candidates = [kwargs.get('quad_segs'), kwargs.get('resolution')] + list(args[:1])
+        bind = binder(method, f'{type(obj).__name__}.{name}')
+
+        def buffered(*args, **kwargs):
+            p = bind(args, kwargs)
+            # quad_segs, or resolution (parallel_offset's name, and a keyword buffer still reads)
+            candidates = [p.get('quad_segs'), p.get('resolution')]
             segments = max([_segment_count(c) for c in candidates if c is not None], default=0)
             if segments > _MAX_QUAD_SEGS:
                 refuse(f'{name} with {segments} segments per quarter circle; the sandbox allows {_MAX_QUAD_SEGS}')
@@ -672,8 +811,9 @@ def _geometry_method(obj, name):
             # every vertex of the geometry gets a quarter circle (GEOS works without the interpreter: a buffer of
             # a 100,000-point line runs for a minute, out of the tracer's reach)
             vertices = max(int(shapely.get_num_coordinates(obj)), 1)
-            check_elements(int(numpy.size(distance)) * (4 * max(segments, 16) + 1) * vertices, name)
-            return method(distance, *args, **kwargs)
+            distances = _array_size_estimate(p.get('distance'))
+            check_elements(distances * (4 * max(segments, 16) + 1) * vertices, name)
+            return method(*args, **kwargs)
         return buffered
     if name == 'segmentize':
         def segmentize(max_segment_length):
@@ -694,6 +834,8 @@ def guarded_getattr(obj, name):
     """Attribute reads of generated code. Names were screened by the AST check; this adds checks on values."""
     if isinstance(obj, type):
         if name in _REFUSED_ON_TYPES:
+            if name == 'from_bytes' and issubclass(obj, int):
+                return _checked_from_bytes(getattr(obj, name))  # the check a value's from_bytes has
             forbid(f'{obj.__name__}.{name} cannot be used unbound in the sandbox; call it on a value')
         return getattr(obj, name)
     if isinstance(obj, (str, bytes, bytearray)):
@@ -704,7 +846,10 @@ def guarded_getattr(obj, name):
         return _array_method(obj, name)
     if isinstance(obj, BaseGeometry):
         return _geometry_method(obj, name)
-    if isinstance(obj, int) and name == 'to_bytes':
+    if isinstance(obj, int) and name in ('to_bytes', 'from_bytes'):
+        if name == 'from_bytes':
+            return _checked_from_bytes(obj.from_bytes)  # the check the class's from_bytes has
+
         def to_bytes(length=1, *args, **kwargs):
             check_length(length, 'int.to_bytes')
             return obj.to_bytes(length, *args, **kwargs)
@@ -770,81 +915,77 @@ def _check_result(value, what):
     return value
 
 
-# Positional parameter names of the allow-listed functions that have size rules: a rule reads one dict whatever
-# mix of positional and keyword arguments the program used.
-PARAMETERS = {
-    'zeros': ('shape', 'dtype'), 'ones': ('shape', 'dtype'), 'empty': ('shape', 'dtype'),
-    'full': ('shape', 'fill_value', 'dtype'), 'zeros_like': ('a', 'dtype', 'order', 'subok', 'shape'),
-    'ones_like': ('a', 'dtype', 'order', 'subok', 'shape'),
-    'linspace': ('start', 'stop', 'num', 'endpoint', 'retstep', 'dtype', 'axis'),
-    'eye': ('N', 'M', 'k', 'dtype'), 'identity': ('n', 'dtype'), 'array': ('object', 'dtype'),
-    'asarray': ('a', 'dtype'), 'outer': ('a', 'b'), 'kron': ('a', 'b'), 'tile': ('A', 'reps'),
-    'repeat': ('a', 'repeats', 'axis'), 'dot': ('a', 'b'), 'matmul': ('x1', 'x2'), 'diff': ('a', 'n', 'axis'),
-    'concatenate': ('arrays',), 'stack': ('arrays',), 'vstack': ('tup',), 'hstack': ('tup',),
-    'column_stack': ('tup',), 'random': ('size',), 'normal': ('loc', 'scale', 'size'),
-    'uniform': ('low', 'high', 'size'), 'randint': ('low', 'high', 'size', 'dtype'),
-    'choice': ('a', 'size', 'replace', 'p'), 'percentile': ('a', 'q', 'axis'), 'median': ('a', 'axis'),
-}
+# ---------------------------------------------------------------------------------------------------- binding
+# Rules read a call's arguments by parameter name, bound the way the function binds them (binding.py): positional
+# and keyword alike, defaults filled in.
+_NO_VALUE = numpy._NoValue  # NumPy's default for "not given"
 
 
+# NumPy functions whose own signature says less than they accept (np.arange reads start and stop by name too).
+def _arange_signature(start=None, stop=None, step=None, dtype=None, *, device=None, like=None):
+    """np.arange as it binds its arguments: np.arange(stop=3), np.arange(1, 5, step=2)."""
+
+
+SIGNATURES = {'arange': _arange_signature}
+
+
+# ---------------------------------------------------------------------------------------------------- NumPy rules
+# Each rule gets the bound parameters and returns the elements of the result (inputs are checked apart).
 def _rule_shape(p):
     if isinstance(p.get('fill_value'), (str, bytes)):
         forbid('np.full with a string fill value is not available in the sandbox')
-    return _shape_count(p.get('shape', 0))
+    return _shape_count(p['shape'])
 
 
 def _rule_like(p):
-    shape = p.get('shape')
-    return _size(p.get('a')) if shape is None else _shape_count(shape)
+    shape = p['shape']
+    return _size(p['a']) if shape is None else _shape_count(shape)
 
 
-def _rule_arange(p, args, kwargs):
-    first = args[0] if args else kwargs.get('start')
-    stop = args[1] if len(args) > 1 else kwargs.get('stop')
-    step = args[2] if len(args) > 2 else kwargs.get('step')
-    if len(args) > 3:
-        check_dtype(args[3], 'np.arange')
-    start = 0 if stop is None else first
-    stop = first if stop is None else stop
+def _rule_arange(p):
+    start, stop, step = p['start'], p['stop'], p['step']
+    if stop is None:  # np.arange(n): n is the stop
+        start, stop = 0, start
+    elif start is None:  # np.arange(stop=n)
+        start = 0
     step = 1 if step is None else step
     if stop is None or step == 0:
-        return 0
+        return 0  # numpy raises its own error
     return max(int(math.ceil((float(stop) - float(start)) / float(step))), 0)
 
 
 def _rule_linspace(p):
-    num = operator.index(p.get('num', 50))
-    return num * max(_broadcast_count(p.get('start'), p.get('stop')), 1)
+    num = operator.index(p['num'])
+    return num * max(_broadcast_count(p['start'], p['stop']), 1)
 
 
 def _rule_eye(p):
-    rows = operator.index(p.get('N', p.get('n', 1)))
+    rows = operator.index(p['N'] if 'N' in p else p['n'])
     cols = p.get('M')
     return rows * (rows if cols is None else operator.index(cols))
 
 
 def _rule_input(p):
-    return _size(p.get('object', p.get('a')))
+    return _size(p['object'] if 'object' in p else p['a'])
 
 
 def _rule_join(p):
-    return sum(_size(item) for item in p.get('arrays', p.get('tup', ())))
+    return sum(_size(item) for item in (p['arrays'] if 'arrays' in p else p['tup']))
 
 
 def _rule_outer(p):
-    return _size(p.get('a')) * _size(p.get('b'))
+    return _size(p['a']) * _size(p['b'])
 
 
 def _rule_tile(p):
-    return _size(p.get('A')) * _shape_count(p.get('reps', 1))
+    return _size(p['A']) * _shape_count(p['reps'])
 
 
 def repeat_elements(a, repeats, axis):
     """Elements, or for zero-width chunks the copies, np.repeat makes: numpy loops once per repeated chunk, so
     repeating an empty row 10 ** 12 times along an axis is 10 ** 12 steps although the result is empty."""
     shape = _shape_estimate(a) or (1,)
-    if numpy.size(repeats) > LIMITS.max_array_elements:
-        check_elements(numpy.size(repeats), 'np.repeat counts')
+    check_elements(_array_size_estimate(repeats), 'np.repeat counts')  # before they are converted
     counts = numpy.asarray(repeats)
     if counts.dtype.kind not in 'biu' or not counts.size:
         return 0  # numpy raises its own error (or repeats nothing)
@@ -858,14 +999,14 @@ def repeat_elements(a, repeats, axis):
 
 
 def _rule_repeat(p):
-    return repeat_elements(p.get('a'), p.get('repeats', 1), p.get('axis'))
+    return repeat_elements(p['a'], p['repeats'], p['axis'])
 
 
 def _rule_quantile(p):
     """np.percentile / np.median: one result per quantile and per element of the axes not reduced."""
-    shape = _shape_estimate(p.get('a'))
+    shape = _shape_estimate(p['a'])
     size = math.prod(shape)
-    axis = p.get('axis')
+    axis = p['axis']
     if axis is None:
         kept = 1
     else:
@@ -878,97 +1019,146 @@ def _rule_quantile(p):
     return max(size, _array_size_estimate(p.get('q', 0)) * kept)
 
 
-def _rule_meshgrid(p, args, kwargs):
-    return math.prod(_size(a) for a in args) * max(len(args), 1)
+def _rule_meshgrid(p):
+    arrays = p['xi']
+    return math.prod(_size(a) for a in arrays) * max(len(arrays), 1)
 
 
 def _rule_matmul(p):
-    a, b = p.get('a', p.get('x1')), p.get('b', p.get('x2'))
-    if a is not None and b is not None:
-        _matmul_check(numpy.asarray(a), numpy.asarray(b))
+    a, b = (p['a'], p['b']) if 'a' in p else (p['x1'], p['x2'])
+    _matmul_check(a, b)
     return 0
 
 
 def _rule_diff(p):
-    n = operator.index(p.get('n', 1))
-    if n > _size(p.get('a')):  # numpy loops n times in Python, out of the tracer's sight
+    n = operator.index(p['n'])
+    if n > _size(p['a']):  # numpy loops n times in Python, out of the tracer's sight
         forbid(f'np.diff with n={n} larger than the array is not available in the sandbox')
     return 0
 
 
-def _rule_shape_args(p, args, kwargs):
+_MAX_ROLL_PAIRS = 64  # NumPy's most dimensions
+
+
+def _rule_roll(p):
+    """np.roll loops in Python over every (shift, axis) pair it is given, out of the tracer's sight."""
+    if max(_array_size_estimate(p['shift']), _array_size_estimate(p['axis'])) > _MAX_ROLL_PAIRS:
+        forbid(f'np.roll with more than {_MAX_ROLL_PAIRS} shifts or axes is not available in the sandbox')
+    return 0
+
+
+def _rule_dimensions(p):
     """np.random.rand(2, 3) style: every positional argument is a dimension."""
-    return math.prod(operator.index(d) for d in args) if args else 1
+    return _shape_count(p['args'])
 
 
 def _rule_size(p):
-    return _shape_count(p.get('size'))
+    return _shape_count(p['size'])
 
 
 def _rule_distribution(p):
-    if p.get('size') is not None:
+    if p['size'] is not None:
         return _shape_count(p['size'])
-    return _broadcast_count(p.get('loc', p.get('low')), p.get('scale', p.get('high')))
+    first, second = ('loc', 'scale') if 'loc' in p else ('low', 'high')
+    return _broadcast_count(p[first], p[second])
 
 
 def _rule_choice(p):
-    population = p.get('a')
-    if p.get('replace', True) is False:  # numpy permutes the whole population first
+    population = p['a']
+    if not p['replace']:  # numpy permutes the whole population first (any false value, as numpy tests it)
         check_elements(operator.index(population) if isinstance(population, (int, numpy.integer))
                        else _size(population), 'np.random.choice without replacement')
-    return _shape_count(p.get('size'))
+    return _shape_count(p['size'])
+
+
+# Cubic-time linear algebra: inputs are kept small so a single call stays well under a second; svd also makes
+# its factors, which with full_matrices are square in each dimension (a 1 x 15000 input has a 15000 x 15000 V).
+MAX_MATRIX_ELEMENTS = 250_000
+
+
+def _check_matrix(value, what):
+    size = _array_size_estimate(value)
+    if size > MAX_MATRIX_ELEMENTS:
+        refuse(f'{what} on more than {MAX_MATRIX_ELEMENTS:,} elements is not allowed in the sandbox '
+               f'(this matrix has {size:,})')
+
+
+def _matrix_rule(what):
+    def rule(p):
+        _check_matrix(p['a'], what)
+        return _size(p['a'])
+    return rule
+
+
+def _rule_svd(p):
+    shape = _shape_estimate(p['a'])
+    _check_matrix(p['a'], 'np.linalg.svd')
+    if not p['compute_uv'] or len(shape) < 2:
+        return math.prod(shape)
+    rows, cols = shape[-2], shape[-1]
+    both = min(rows, cols)
+    factors = rows * rows + cols * cols if p['full_matrices'] else (rows + cols) * both
+    return math.prod(shape[:-2]) * (factors + both)
+
+
+def _rule_norm(p):
+    """np.linalg.norm: the 2-norm and nuclear norm of a matrix are a singular value decomposition."""
+    shape = _shape_estimate(p['x'])
+    axis = p['axis']
+    matrix = len(shape) == 2 if axis is None else isinstance(axis, (tuple, list)) and len(axis) == 2
+    try:
+        spectral = p['ord'] in (2, -2, 'nuc')
+    except Exception:
+        spectral = True  # numpy raises its own error
+    if matrix and spectral:
+        _check_matrix(p['x'], 'np.linalg.norm with this ord')
+    return 0
 
 
 SIZE_RULES = {
     'zeros': _rule_shape, 'ones': _rule_shape, 'empty': _rule_shape, 'full': _rule_shape,
-    'zeros_like': _rule_like, 'ones_like': _rule_like,
+    'zeros_like': _rule_like, 'ones_like': _rule_like, 'arange': _rule_arange,
     'linspace': _rule_linspace, 'eye': _rule_eye, 'identity': _rule_eye,
     'array': _rule_input, 'asarray': _rule_input,
     'concatenate': _rule_join, 'stack': _rule_join, 'vstack': _rule_join, 'hstack': _rule_join,
-    'column_stack': _rule_join,
+    'column_stack': _rule_join, 'meshgrid': _rule_meshgrid,
     'outer': _rule_outer, 'kron': _rule_outer, 'tile': _rule_tile, 'repeat': _rule_repeat,
-    'dot': _rule_matmul, 'matmul': _rule_matmul, 'diff': _rule_diff,
+    'dot': _rule_matmul, 'matmul': _rule_matmul, 'diff': _rule_diff, 'roll': _rule_roll,
+    'rand': _rule_dimensions, 'randn': _rule_dimensions,
     'random': _rule_size, 'normal': _rule_distribution, 'uniform': _rule_distribution,
     'randint': _rule_distribution, 'choice': _rule_choice,
     'percentile': _rule_quantile, 'median': _rule_quantile,
+    **{name: _matrix_rule(f'np.linalg.{name}') for name in ('inv', 'det', 'solve', 'pinv', 'eig')},
+    'svd': _rule_svd, 'norm': _rule_norm,
 }
-# Rules that need the raw arguments (variadic or position-dependent signatures).
-RAW_SIZE_RULES = {'arange': _rule_arange, 'meshgrid': _rule_meshgrid, 'rand': _rule_shape_args,
-                  'randn': _rule_shape_args}
-
-
-# Cubic-time linear algebra: inputs are kept small so a single call stays well under a second.
-MATRIX_FUNCTIONS = frozenset({'inv', 'det', 'solve', 'pinv', 'eig', 'svd'})
-MAX_MATRIX_ELEMENTS = 250_000
-
-
-def _merge(names, args, kwargs):
-    merged = dict(zip(names, args))
-    merged.update(kwargs)
-    return merged
+# Keywords that change what a ufunc computes with: a loop over Python objects (signature='O->O').
+_REFUSED_KEYWORDS = frozenset({'signature', 'sig'})
 
 
 def wrap_numpy_function(name, function):
-    """NumPy function for generated code: result size checked before the call; array arguments broadcast-checked."""
-    rule = SIZE_RULES.get(name)
-    raw_rule = RAW_SIZE_RULES.get(name)
-    names = PARAMETERS.get(name, ())
-    cubic = name in MATRIX_FUNCTIONS
+    """NumPy function for generated code (`name` as the program writes it after `np.`: 'zeros', 'linalg.svd'):
+    the arguments bound by the function's signature, checked (sizes, dtypes, broadcast), the result's size bounded
+    before the call, the result checked after it."""
+    short = name.rpartition('.')[2]
+    what = f'np.{name}'
+    rule = SIZE_RULES.get(short)
+    bind = binder(SIGNATURES.get(short, function), what, _NO_VALUE)
+    if bind is None and rule is not None:
+        raise RuntimeError(f'{what} has a size rule but no signature to bind its arguments with')
     is_type = isinstance(function, type)  # np.float64(...) and friends
 
     def call(*args, **kwargs):
-        if cubic and args and _array_size_estimate(args[0]) > MAX_MATRIX_ELEMENTS:
-            refuse(f'np.linalg.{name} on more than {MAX_MATRIX_ELEMENTS:,} elements is not allowed in the sandbox')
-        merged = _merge(names, args, kwargs)
-        check_dtype(merged.get('dtype'), f'np.{name}')
+        p = bind(args, kwargs) if bind is not None else kwargs
+        if not _REFUSED_KEYWORDS.isdisjoint(kwargs):
+            forbid(f'{what}: the keyword argument signature is not available in the sandbox')
+        # inputs first: no rule below may convert a list the limits have not seen
+        _check_arguments(itertools.chain(args, kwargs.values()), what)
+        check_dtype(p.get('dtype'), what)
         if is_type and args and isinstance(args[0], (str, bytes)):
-            forbid(f'np.{name} of a string is not available in the sandbox')
+            forbid(f'{what} of a string is not available in the sandbox')
         if rule is not None:
-            check_elements(rule(merged), f'np.{name}')
-        elif raw_rule is not None:
-            check_elements(raw_rule(merged, args, kwargs), f'np.{name}')
-        _check_arguments(itertools.chain(args, kwargs.values()), f'np.{name}')
-        return _check_result(function(*args, **kwargs), f'np.{name}')
+            check_elements(rule(p), what)
+        return _check_result(function(*args, **kwargs), what)
     return call
 
 
