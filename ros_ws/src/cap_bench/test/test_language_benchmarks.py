@@ -5,6 +5,7 @@ Each run here is a whole `run()` as `cap bench <name>` does it: what a user woul
 records, so the tests read those."""
 from __future__ import annotations
 
+import functools
 import json
 import os
 import subprocess
@@ -15,11 +16,14 @@ import pytest
 from cap_bench.codegen import bench as codegen
 from cap_bench.codegen.problems import CATEGORIES, WRONG_SOURCES, problem
 from cap_bench.humaneval import bench as humaneval
+from cap_bench.language import session
 from cap_bench.language.policy import PolicyOptions, open_client
 from cap_bench.language.runner import ITEMS_FILE
 from cap_bench.reasoning import bench as reasoning
 from cap_bench.reasoning.questions import QUESTIONS
+from cap_lmp.isolated_engine import IsolatedEngine
 from cap_lmp.sandbox import SandboxLimits
+from cap_lmp.testing.syscall_audit import SyscallAudit
 
 ORACLE = PolicyOptions('oracle')
 
@@ -50,6 +54,22 @@ def test_codegen_oracle_passes_every_problem_in_the_four_variants(tmp_path):
     assert record['calls'][0]['prompt'].endswith(f"# define function: {record['signature']}.\n")
     assert (tmp_path / 'report.png').stat().st_size > 1000
 
+
+
+def test_the_jail_refuses_nothing_the_language_benchmarks_run(tmp_path, monkeypatch):
+    """The three benchmarks' sandbox processes with the jail's filter audited (cap_lmp.testing.syscall_audit): every
+    call it would refuse is let through and counted. Each item passes, and the filter refused nothing."""
+    with SyscallAudit('refusals') as audit:
+        monkeypatch.setattr(session, 'IsolatedEngine',
+                            functools.partial(IsolatedEngine, child_command=audit.child_command))
+        summaries = [codegen.run(ORACLE, tmp_path / 'codegen', prompts=('flat',), show_progress=False),
+                     humaneval.run(ORACLE, tmp_path / 'humaneval', limit=20, show_progress=False),
+                     reasoning.run(ORACLE, tmp_path / 'reasoning', show_progress=False)]
+    rows = [(row['variant'], row['passed'], row['items']) for summary in summaries for row in summary['rows']
+            if row['group'] == 'all']
+    assert len(rows) == 7 and all(passed == items > 0 for _, passed, items in rows), rows
+    assert audit.errors == []
+    assert dict(audit.calls) == {}
 
 def test_codegen_catches_a_wrong_solution_in_every_category(tmp_path):
     wrong = {name: source for name, source in WRONG_SOURCES.values()}

@@ -43,9 +43,12 @@ exception, and the engine then drops what the command bound (or resets the sessi
 says so). A lost process means a lost session (variables and generated functions); a new process is started at once
 (its start is awaited by the next command), and the result's message says so.
 
-What it is not, on its own: a security jail. The sandbox process runs as the same user and sees the same files;
-generated code that escaped the in-process checks could reach them. It bounds crashes, stalls, time, memory and
-stops; for models you do not trust at all, also run the node in a container or as a user of its own.
+The process has no terminal of the node: stdin and stdout are /dev/null, stderr (its log) a pipe whose lines this
+side copies to its own stderr. Unless `jail='off'`, the process enters the kernel jail before its first program
+(sandbox/jail.py: only the system calls and files it needs, read-only); `jail` says whether a kernel that cannot
+hold the whole jail stops the start ('required') or is logged ('best_effort'). What the jail does not cover (the
+same uid; what Landlock cannot express) is listed there; for models you do not trust at all, also run the node in
+a container or as a user of its own.
 """
 from __future__ import annotations
 
@@ -59,7 +62,7 @@ import subprocess
 import sys
 import threading
 import time
-from typing import Any, Callable, Mapping, Sequence
+from typing import IO, Any, Callable, Mapping, Sequence
 
 from cap_lmp import wire
 from cap_lmp.wire import CallableHandle
@@ -92,6 +95,28 @@ def _unpin(pid: int) -> None:
         os.sched_setaffinity(pid, range(os.cpu_count() or 1))
     except OSError:  # CPUs this process may not use (a cgroup's cpuset), or the process is gone: keep what it has
         pass
+
+
+def _forward_log(pipe: IO[bytes]) -> threading.Thread:
+    """Copy the sandbox process' log (its stderr, a pipe) to this process' stderr as it comes, on a thread that ends
+    with the pipe. The process gets no terminal of the node: nothing there for it to read, resize or reconfigure."""
+
+    def copy() -> None:
+        try:
+            while chunk := os.read(pipe.fileno(), 1 << 16):
+                try:
+                    while chunk:
+                        chunk = chunk[os.write(2, chunk):]
+                except OSError:  # our stderr is closed or would block: this part is lost, the process goes on
+                    pass
+        except OSError:
+            pass
+        finally:
+            pipe.close()
+
+    thread = threading.Thread(target=copy, name='sandbox_log', daemon=True)
+    thread.start()
+    return thread
 
 
 class _ProcessLost(Exception):
@@ -296,6 +321,7 @@ class IsolatedEngine:
         self._cancel_at: float | None = None
         self._closed = False
         self._process: subprocess.Popen | None = None
+        self._log_copier: threading.Thread | None = None  # copies the process' stderr to ours
         self._data: socket.socket | None = None  # setup, run, reset, replies; events, calls, results
         self._control: socket.socket | None = None  # cancel only, so that it never waits behind a reply
         self._frames = wire.FrameBuffer(wire.MAX_RESULT_BYTES)
@@ -323,10 +349,13 @@ class IsolatedEngine:
                     'OMP_NUM_THREADS': '1', 'PYTHONDONTWRITEBYTECODE': '1'})
         with child_data, child_control:
             fds = (child_data.fileno(), child_control.fileno())
-            # A session of its own: a kill reaches whatever the process may have forked.
+            # A session of its own: a kill reaches whatever the process may have forked. No terminal: stdin and
+            # stdout on /dev/null, its log on a pipe copied to ours.
             self._process = subprocess.Popen([*self._child_command, *map(str, fds)], pass_fds=fds, env=env,
-                                             stdin=subprocess.DEVNULL, start_new_session=True)
+                                             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                             stderr=subprocess.PIPE, start_new_session=True)
         _unpin(self._process.pid)  # before it has started the threads that would inherit the pin
+        self._log_copier = _forward_log(self._process.stderr)
         data.settimeout(self.send_timeout_s)  # bounds sends; receives happen only after poll says data is there
         control.settimeout(self.send_timeout_s)
         self._data, self._control = data, control
@@ -403,6 +432,8 @@ class IsolatedEngine:
                 if process.poll() is None:
                     process.kill()
             code = process.wait()
+            if self._log_copier is not None:  # its last lines (why it ended) before anyone reports the end
+                self._log_copier.join(timeout=0.1)
         for connection in (self._data, self._control):
             if connection is not None:
                 connection.close()

@@ -34,9 +34,10 @@ class LmpNodeConfig:
                                       'stopped, and the node warns at start-up).')
     stall_limit_s: float = parameter(10.0, 'With sandbox_process: kill the sandbox process when one operation holds '
                                      'it this long without a pause [s].')
-    jail: str = parameter('required', 'With sandbox_process: the kernel jail of the sandbox process (no file writes, '
-                          'sockets, exec or new processes): required (the node does not start without it), '
-                          'best_effort (what the kernel offers, the rest logged) or off.')
+    jail: str = parameter('required', 'With sandbox_process: the kernel jail of the sandbox process (only the system '
+                          'calls and files it needs, read-only; no sockets, exec, new processes or terminal): required '
+                          '(the node does not start without it), best_effort (what the kernel offers, the rest logged) '
+                          'or off.')
     model_time_limit_s: float = parameter(120.0, 'Overall model time per command [s].')
     regenerations: int = parameter(2, 'How often an answer that cannot be run (a syntax error, a name nothing '
                                    'defines, an object neither on the table nor in the command) is asked for again, '

@@ -11,7 +11,9 @@ modules), then, by `mode`:
   fails with ENOSYS) or seccomp (seccomp(2) ENOSYS, prctl(PR_SET_SECCOMP) EINVAL), as some containers do, then
   `enter_jail(required=False)`;
 - `required_without_landlock`: the same, then `enter_jail()`, which must refuse;
-- `jail_with_a_thread`: starts a thread first, then `enter_jail(required=False)` (the report must say so).
+- `jail_with_a_thread`: starts a thread first, then `enter_jail(required=False)` (the report must say so);
+- `audit_all` / `audit_refusals`: `enter_jail(audit='all' | 'refusals')`, for a SyscallAudit
+  (syscall_audit.py) the test attaches to this process.
 
 It sends the outcome ({'jail': report fields} or {'jail_error': message}) on the socket, then runs each message
 it receives as raw Python with `channel` (the socket's Connection) in scope — this is the test-only hook that
@@ -66,8 +68,12 @@ def _enter(mode: str) -> dict:
     elif mode == 'jail_with_a_thread':
         threading.Thread(target=threading.Event().wait, daemon=True).start()
     try:
-        report = jail.enter_jail() if mode in ('jail', 'required_without_landlock') \
-            else jail.enter_jail(required=False)
+        if mode.startswith('audit_'):
+            report = jail.enter_jail(audit=mode.removeprefix('audit_'))
+        elif mode in ('jail', 'required_without_landlock'):
+            report = jail.enter_jail()
+        else:
+            report = jail.enter_jail(required=False)
     except jail.JailError as error:
         return {'jail_error': str(error)}
     return {'jail': dataclasses.asdict(report)}
