@@ -116,7 +116,7 @@ def _branches(rotation: np.ndarray, position: np.ndarray, branch: np.ndarray | i
     elementwise over them; NumPy throughout, so that a whole path is solved in one pass.
 
     Returns the joints `q` (6, ...) (joint first; not wrapped; NaN where the branch does not exist), `radius` (wrist
-    centre to the base axis), `span` (what the elbow chain would need to span), `singular` (theta5 = 0, where
+    centre to the base axis), `x14`, `y14` (what the elbow chain would need to span), `singular` (theta5 = 0, where
     `wrist_singular_q6` is used for theta6) and `separation`: a lower bound on the joint distance from this branch's
     solution to every other branch's (each other branch differs in theta1, else theta5, else theta3, by at least this
     much, whatever multiple of 2*pi is added), which tells when the nearest branch to a seed cannot be another one.
@@ -136,7 +136,7 @@ def _branches(rotation: np.ndarray, position: np.ndarray, branch: np.ndarray | i
     px, py, pz = p
     # Wrist centre (origin of DH frame 5): d6 back along the flange's z axis.
     wx, wy = px - d6 * r02, py - d6 * r12
-    radius = np.hypot(wx, wy)
+    radius = np.sqrt(wx * wx + wy * wy)
     near_axis = radius < d4
     safe_radius = np.maximum(radius, d4)
     sin_lateral = d4 / safe_radius
@@ -157,7 +157,7 @@ def _branches(rotation: np.ndarray, position: np.ndarray, branch: np.ndarray | i
     s5_safe = np.where(singular, 1.0, s5)
     x6, y6 = (r00 * s1 - r10 * c1) / s5_safe, -(r01 * s1 - r11 * c1) / s5_safe
     theta6 = np.where(singular, wrist_singular_q6, np.arctan2(y6, x6))
-    norm6 = np.where(singular, 1.0, np.hypot(x6, y6))
+    norm6 = np.where(singular, 1.0, np.sqrt(x6 * x6 + y6 * y6))
     norm6 = np.where(norm6 > 0.0, norm6, 1.0)  # 0 only off the arm's reach (too near the base axis)
     c6 = np.where(singular, np.cos(wrist_singular_q6), x6 / norm6)
     s6 = np.where(singular, np.sin(wrist_singular_q6), y6 / norm6)
@@ -183,7 +183,7 @@ def _branches(rotation: np.ndarray, position: np.ndarray, branch: np.ndarray | i
     # Differences of the other branches: pi - 2 lateral (theta1), 2 theta5 and 2 theta3, each taken modulo 2 pi.
     separation = np.minimum(np.minimum(math.pi - 2 * lateral, math.pi - np.abs(math.pi - 2 * wrist_angle)),
                             math.pi - np.abs(math.pi - 2 * elbow_angle))
-    return {'q': q, 'radius': radius, 'span': np.hypot(x14, y14), 'singular': singular, 'separation': separation}
+    return {'q': q, 'radius': radius, 'x14': x14, 'y14': y14, 'singular': singular, 'separation': separation}
 
 
 def _flange(pose: np.ndarray, tool_offset: float) -> tuple[np.ndarray, np.ndarray]:
@@ -202,7 +202,7 @@ def _all_branches(pose: np.ndarray, tool_offset: float, wrist_singular_q6: float
                       f'needs at least {DH_D[3]:.4f} m')
     solutions = solved['q'].T
     if np.all(np.isnan(solutions)):
-        spans = ', '.join(f'{span:.4f}' for span in solved['span'][::2])
+        spans = ', '.join(f'{span:.4f}' for span in np.hypot(solved['x14'], solved['y14'])[::2])
         raise IKError(f'pose out of reach: the elbow chain would need to span {spans} m but spans at most '
                       f'{ARM_REACH:.4f} m (TCP at {np.round(pose[:3, 3], 4).tolist()})')
     return solutions
@@ -261,7 +261,7 @@ def inverse_kinematics(pose: np.ndarray, q_seed: Sequence[float] | None = None,
 
 # Samples a path's branch is followed over at once (`inverse_kinematics_path`); after a sample that needs the full
 # search, the window starts small and doubles, so that a stretch near a singularity costs little more than before.
-_PATH_WINDOW = 4096
+_PATH_WINDOW = 16384
 
 
 def inverse_kinematics_path(poses: np.ndarray, q_seed: Sequence[float],
@@ -300,10 +300,18 @@ def inverse_kinematics_path(poses: np.ndarray, q_seed: Sequence[float],
         end = min(count, done + window)
         solved = _branches(rotations if constant else rotations[..., done:end], positions[:, done:end], branch)
         candidates = solved['q']  # (6, n): joint first, each row contiguous
-        before = np.concatenate([previous[:, None], candidates[:, :-1]], axis=1)
         # Each angle moved by the multiple of 2 pi that puts it nearest the one before.
-        chained = candidates + (2 * math.pi) * np.cumsum(np.round((before - candidates) / (2 * math.pi)), axis=1)
-        steps = np.diff(np.concatenate([previous[:, None], chained], axis=1), axis=1)
+        turns = np.empty_like(candidates)
+        np.subtract(previous, candidates[:, 0], out=turns[:, 0])
+        np.subtract(candidates[:, :-1], candidates[:, 1:], out=turns[:, 1:])
+        turns = np.round(turns * (1 / (2 * math.pi)))
+        if np.any(turns[:, 1:]):
+            chained = candidates + (2 * math.pi) * np.cumsum(turns, axis=1)
+        else:  # the usual case: one multiple of 2 pi for the whole window
+            chained = candidates + (2 * math.pi) * turns[:, :1]
+        steps = np.empty_like(chained)
+        np.subtract(chained[:, 0], previous, out=steps[:, 0])
+        np.subtract(chained[:, 1:], chained[:, :-1], out=steps[:, 1:])
         good = ((solved['separation'] > 2 * np.sqrt(np.einsum('ij,ij->j', steps, steps)) + 1e-9)
                 & ~solved['singular'] & np.all((chained >= lower) & (chained <= upper), axis=0))
         accepted = int(np.argmin(good)) if not np.all(good) else end - done  # NaN columns are not good

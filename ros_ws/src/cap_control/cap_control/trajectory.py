@@ -236,17 +236,23 @@ class _PathParameterProfiles:
         return times, np.concatenate([[0.0], np.clip(s, 0.0, 1.0)]), np.concatenate([[first], path]), starts
 
 
-def _finite_difference(values: np.ndarray, times: np.ndarray, at_rest: np.ndarray) -> np.ndarray:
-    """d values / d time along the last axis (second-order central differences, np.gradient's for uneven steps),
-    zero at the samples `at_rest` (where a path starts or ends) and at both ends."""
-    derivative = np.zeros_like(values)
-    if len(times) < 3:
-        return derivative
+def _finite_difference(times: np.ndarray, at_rest: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """d values / d time along the last axis of what it is given (second-order central differences, np.gradient's
+    for uneven steps), zero at the samples `at_rest` (where a path starts or ends) and at both ends."""
     before, after = np.diff(times[:-1]), np.diff(times[1:])
-    derivative[..., 1:-1] = (-after / (before * (before + after)) * values[..., :-2]
-                             + (after - before) / (before * after) * values[..., 1:-1]
-                             + before / (after * (before + after)) * values[..., 2:])
-    derivative[..., at_rest] = 0.0
+    weights = (-after / (before * (before + after)), (after - before) / (before * after),
+               before / (after * (before + after)))
+
+    def derivative(values: np.ndarray) -> np.ndarray:
+        result = np.zeros_like(values)
+        if len(times) < 3:
+            return result
+        middle = result[..., 1:-1]
+        np.multiply(weights[0], values[..., :-2], out=middle)
+        middle += weights[1] * values[..., 1:-1]
+        middle += weights[2] * values[..., 2:]
+        result[..., at_rest] = 0.0
+        return result
     return derivative
 
 
@@ -403,8 +409,9 @@ def _solve_timed(q_start: np.ndarray, poses_at: Callable[[np.ndarray, np.ndarray
             f'(a joint jumps by {steps[jump]:.2f} rad between samples)')
     if unreachable is not None:
         raise unreachable
-    velocities = _finite_difference(positions, times, starts)  # every path starts and ends at rest
-    accelerations = _finite_difference(velocities, times, starts)
+    derivative = _finite_difference(times, starts)  # every path starts and ends at rest
+    velocities = derivative(positions)
+    accelerations = derivative(velocities)
     ratio = np.maximum(np.max(np.abs(velocities) / limits.velocity[:, None], axis=0),
                        np.sqrt(np.max(np.abs(accelerations) / limits.acceleration[:, None], axis=0)))
     return (JointTrajectory(times, positions.T, velocities.T, accelerations.T), starts,

@@ -1,5 +1,6 @@
 """The path executor over fake ports: what it sends, and how it ends on a lost contact, a stop, a refused path."""
 import threading
+import time
 from concurrent.futures import Future
 
 import numpy as np
@@ -133,3 +134,21 @@ def test_a_stop_cancels_the_motion_in_progress():
     assert outcome.ending == Ending.STOPPED and outcome.code == PathErrorCode.CANCELLED
     assert 'stopped by cap/stop' in outcome.message
     assert len(arm.goals) <= 4
+
+
+def _scribble(count: int) -> list[np.ndarray]:
+    """`count` points all over the board: thousands of corners, hours of drawing."""
+    rng = np.random.default_rng(0)
+    return [np.column_stack([rng.uniform(-0.23, 0.23, count), rng.uniform(-0.68, -0.32, count)])]
+
+
+def test_a_stop_while_planning_ends_the_run_at_once_with_nothing_sent():
+    arm = FakeArm()
+    interruption = Interruption()
+    threading.Timer(0.05, interruption.stop).start()
+    started = time.monotonic()
+    outcome = PathExecutor(arm, arm, stop_source='cap/stop').run(PathRequest(_scribble(5000), 'marker'), interruption)
+    assert outcome.ending == Ending.STOPPED and outcome.code == PathErrorCode.CANCELLED
+    assert time.monotonic() - started < 0.5
+    assert arm.goals == []
+

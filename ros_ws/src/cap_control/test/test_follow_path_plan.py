@@ -1,5 +1,6 @@
 """Planning a tool's path over the whiteboard: checks before anything moves, timing, reach, tool orientation."""
 import math
+import time
 
 import numpy as np
 import pytest
@@ -81,3 +82,27 @@ def test_sharp_corners_stop_the_tool_and_a_moving_tool_never_touches_down_off_th
     # Between strokes the tool travels at travel height.
     travel = tool_tip_positions(plan.steps[4].trajectory, 'marker')
     assert np.all(travel[:, 2] >= board.SURFACE_Z + PathConfig().travel_height - 1e-6)
+
+
+def test_the_largest_stroke_plans_in_well_under_two_seconds():
+    rng = np.random.default_rng(0)  # 5,000 points all over the board: thousands of corners, hours of drawing
+    scribble = np.column_stack([rng.uniform(-0.23, 0.23, 5000), rng.uniform(-0.68, -0.32, 5000)])
+    started = time.process_time()
+    plan = plan_path(READY, [scribble], 'marker')
+    assert time.process_time() - started < 2.0
+    assert plan.points_total == 5000 and plan.duration > 3600
+
+
+def test_planning_looks_for_an_interruption_between_passes():
+    calls = []
+
+    def check_interrupted():
+        calls.append(len(calls))
+        if len(calls) == 3:
+            raise InterruptedError
+
+    rng = np.random.default_rng(1)
+    scribble = np.column_stack([rng.uniform(-0.23, 0.23, 2000), rng.uniform(-0.68, -0.32, 2000)])
+    with pytest.raises(InterruptedError):
+        plan_path(READY, [scribble], 'marker', check_interrupted=check_interrupted)
+    assert len(calls) == 3

@@ -1,7 +1,8 @@
 """Carrying out a FollowPath request over ports to the arm and the tool's spring (plain Python, no ROS).
 
 `PathExecutor.run` plans the whole path from the arm's joints before anything moves (cap_control.follow_path.plan:
-a path off the surface or out of reach fails with nothing moved), then runs its motions one by one, reporting each
+a path off the surface or out of reach fails with nothing moved; a cancel or a stop while it plans ends the run
+within one planning pass, a few hundredths of a second), then runs its motions one by one, reporting each
 with the stroke, the points passed and the progress by length. With a touching tool it checks the tool's spring,
 which the robot reports as a joint: after each landing the compression must come into the tool's band (the tool
 touches the surface), and while a stroke is followed it must stay there (a tool that lifts off, or presses so hard
@@ -144,7 +145,9 @@ class _Run(GoalRun):
     def plan(self, request: PathRequest) -> PathPlan:
         joints = self.wait(self.arm.joints(), self.timeouts.server_timeout,
                            f'{self.arm.joints_description} is not available')
-        return plan_path(joints, request.strokes, request.tool, request.speed, self.executor.config)
+        # A cancel or a stop ends a long plan at its next pass, with nothing sent.
+        return plan_path(joints, request.strokes, request.tool, request.speed, self.executor.config,
+                         check_interrupted=self.check_interrupted)
 
     def execute(self, plan: PathPlan, feedback: FeedbackCallback) -> None:
         total = max(plan.length_total, 1e-12)

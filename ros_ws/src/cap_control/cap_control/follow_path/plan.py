@@ -219,14 +219,23 @@ def polyline_length(points: np.ndarray) -> float:
 def split_at_corners(points: np.ndarray, corner_angle: float) -> list[np.ndarray]:
     """Pieces of the polyline (each sharing its end point with the next) cut where it turns by more than
     `corner_angle`; repeated points are dropped first."""
+    points, cuts = corners(points, corner_angle)
+    if len(points) < 3:
+        return [points]
+    return [points[start:end + 1] for start, end in zip(cuts[:-1], cuts[1:])]
+
+
+def corners(points: np.ndarray, corner_angle: float) -> tuple[np.ndarray, np.ndarray]:
+    """The polyline without repeated points, and the indices where its pieces begin and end: its ends and where
+    it turns by more than `corner_angle` (see split_at_corners)."""
     keep = np.concatenate([[True], np.linalg.norm(np.diff(points, axis=0), axis=1) > 1e-9])
     points = points[keep]
     if len(points) < 3:
-        return [points]
+        return points, np.array([0, len(points) - 1])
     a, b = points[1:-1] - points[:-2], points[2:] - points[1:-1]
     cos = np.sum(a * b, axis=1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
-    cuts = [0, *(np.flatnonzero(np.arccos(np.clip(cos, -1.0, 1.0)) > corner_angle) + 1).tolist(), len(points) - 1]
-    return [points[start:end + 1] for start, end in zip(cuts[:-1], cuts[1:])]
+    turns = np.flatnonzero(np.arccos(np.clip(cos, -1.0, 1.0)) > corner_angle) + 1
+    return points, np.concatenate([[0], turns, [len(points) - 1]])
 
 
 # ----------------------------------------------------------------------------------------------- checks
@@ -390,17 +399,17 @@ def _follow(q: np.ndarray, tool: str, stroke: np.ndarray, z: float, yaw: float, 
             check_interrupted: Callable[[], None]) -> JointTrajectory:
     """Along a stroke at height z: each smooth piece timed along its length, from rest to rest. (The corners of
     the stroke resampled are the stroke's own: resampling adds points only along its straight segments.)"""
-    pieces = [piece for piece in split_at_corners(stroke, config.corner_angle) if len(piece) > 1]
+    points, cuts = corners(stroke, config.corner_angle)  # the pieces: points cuts[k] to cuts[k + 1]
+    if len(points) < 2:
+        return time_joint_path([q], limits)
     # Piece k runs from k to k + 1 of one parameter along the stroke, through its points at their fractions of its
     # length: one interpolation gives the points of any pieces at any of their path parameters.
-    knots, points, lengths = [np.zeros(1)], [stroke[:1]], []
-    for index, piece in enumerate(pieces):
-        steps = np.linalg.norm(np.diff(piece, axis=0), axis=1)
-        lengths.append(float(np.sum(steps)))
-        knots.append(index + np.cumsum(steps[:-1]) / lengths[-1])
-        knots.append([index + 1.0])
-        points.append(piece[1:])
-    knots, points = np.concatenate(knots), np.concatenate(points)
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    lengths = along[cuts[1:]] - along[cuts[:-1]]
+    piece = np.searchsorted(cuts, np.arange(len(points)), side='right') - 1  # the piece each point begins
+    piece[-1] = len(lengths) - 1
+    knots = piece + (along - along[cuts[piece]]) / lengths[piece]
+    knots[cuts[1:]] = np.arange(1, len(cuts))  # a piece's last point is k + 1, not the next piece's start
     flange = flange_pose(tool, (0.0, 0.0, z), yaw)  # at (x, y): moved by (x, y)
 
     def poses_at(piece: np.ndarray, s: np.ndarray) -> np.ndarray:
