@@ -7,10 +7,10 @@ import pytest
 
 from cap_control.kinematics import forward_kinematics
 from cap_control.follow_path.plan import (
-    PathConfig, PathError, PathErrorCode, StepKind, Surface, plan_path, resample, split_at_corners,
+    PathConfig, PathError, PathErrorCode, StepKind, Surface, plan_path, resample, rest_parts, split_at_corners,
     tool_tip_positions,
 )
-from cap_control.trajectory import UR5E_LIMITS
+from cap_control.trajectory import UR5E_LIMITS, concatenate
 from cap_whiteboard import board, tool
 
 READY = np.array([0.8413, -2.2842, 1.7017, -0.9883, -1.5708, -0.7295])
@@ -106,3 +106,15 @@ def test_planning_looks_for_an_interruption_between_passes():
     with pytest.raises(InterruptedError):
         plan_path(READY, [scribble], 'marker', check_interrupted=check_interrupted)
     assert len(calls) == 3
+
+
+def test_a_long_stroke_is_cut_where_it_stops_into_parts_that_make_it_up():
+    zigzag = np.array([[-0.2 + 0.4 * (i % 2), -0.6 + 0.002 * i] for i in range(60)])
+    follow = plan_path(READY, [zigzag], 'marker').steps[2].trajectory
+    parts = rest_parts(follow, 400)
+    assert len(parts) > 1 and max(len(part) for part in parts) <= 400
+    for part in parts:
+        assert part.times[0] == 0.0 and not np.any(part.velocities[[0, -1]])
+    joined = concatenate(parts)
+    assert np.array_equal(joined.positions, follow.positions) and np.allclose(joined.times, follow.times)
+    assert rest_parts(follow, len(follow)) == [follow]

@@ -423,6 +423,26 @@ def _follow(q: np.ndarray, tool: str, stroke: np.ndarray, z: float, yaw: float, 
                                  max_joint_step=config.max_joint_step, check_interrupted=check_interrupted)
 
 
+def rest_parts(trajectory: JointTrajectory, max_samples: int) -> list[JointTrajectory]:
+    """The trajectory cut where it is at rest (every joint's velocity and acceleration zero: a stroke's corners)
+    into consecutive trajectories of at most `max_samples` samples each, each from time 0; more where it does not
+    come to rest that often. One part when it has no more samples than that."""
+    if len(trajectory) <= max_samples:
+        return [trajectory]
+    last = len(trajectory) - 1
+    rests = np.append(np.flatnonzero(~np.any(trajectory.velocities[:-1], axis=1)
+                                     & ~np.any(trajectory.accelerations[:-1], axis=1)), last)
+    cuts = [0]
+    while cuts[-1] < last:
+        # The last rest within max_samples of the part's start, else the first after it (a long smooth piece
+        # goes whole).
+        within = int(rests[np.searchsorted(rests, cuts[-1] + max_samples - 1, side='right') - 1])
+        cuts.append(within if within > cuts[-1] else int(rests[np.searchsorted(rests, cuts[-1], side='right')]))
+    return [JointTrajectory(trajectory.times[a:b + 1] - trajectory.times[a], trajectory.positions[a:b + 1],
+                            trajectory.velocities[a:b + 1], trajectory.accelerations[a:b + 1], trajectory.joint_names)
+            for a, b in zip(cuts[:-1], cuts[1:])]
+
+
 def tool_tip_positions(trajectory: JointTrajectory, tool: str) -> np.ndarray:
     """(N, 3) world positions of the tool's touching point along a trajectory (the commanded path)."""
     flange_to_tool = _flange_to_tool(tool)
