@@ -55,13 +55,6 @@ def _dh_transform(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
     ])
 
 
-def _rigid_inverse(transform: np.ndarray) -> np.ndarray:
-    inverse = np.eye(4)
-    inverse[:3, :3] = transform[:3, :3].T
-    inverse[:3, 3] = -transform[:3, :3].T @ transform[:3, 3]
-    return inverse
-
-
 def _tool_transform(tool_offset: float) -> np.ndarray:
     tool = np.eye(4)
     tool[2, 3] = tool_offset
@@ -102,6 +95,119 @@ def _wrap(angle: float) -> float:
     return math.atan2(math.sin(angle), math.cos(angle))
 
 
+def _wrap_array(angles: np.ndarray) -> np.ndarray:
+    return np.arctan2(np.sin(angles), np.cos(angles))
+
+
+BRANCHES = np.arange(8)  # shoulder (theta1) x wrist (theta5 sign) x elbow (theta3 sign), in this nesting order
+
+
+def _choose(flag: np.ndarray | int, when_set: np.ndarray | float, otherwise: np.ndarray | float) -> np.ndarray:
+    """`when_set` where the branch flag is 1, else `otherwise`: elementwise for an array of branches."""
+    if isinstance(flag, int):
+        return when_set if flag else otherwise
+    return np.where(flag == 1, when_set, otherwise)
+
+
+def _branches(rotation: np.ndarray, position: np.ndarray, branch: np.ndarray | int,
+              wrist_singular_q6: np.ndarray | float = 0.0) -> dict[str, np.ndarray]:
+    """Analytic IK of the flange poses (`rotation` (3, 3, ...), `position` (3, ...): components first, so that each
+    is one contiguous array over the poses) on `branch` (0-7, an int or an array broadcast against the poses),
+    elementwise over them; NumPy throughout, so that a whole path is solved in one pass.
+
+    Returns the joints `q` (6, ...) (joint first; not wrapped; NaN where the branch does not exist), `radius` (wrist
+    centre to the base axis), `x14`, `y14` (what the elbow chain would need to span), `singular` (theta5 = 0, where
+    `wrist_singular_q6` is used for theta6) and `separation`: a lower bound on the joint distance from this branch's
+    solution to every other branch's (each other branch differs in theta1, else theta5, else theta3, by at least this
+    much, whatever multiple of 2*pi is added), which tells when the nearest branch to a seed cannot be another one.
+
+    The planar chain of joints 2-4 is frame 1's view of frame 4: inv(T01) @ flange @ inv(T45 @ T56), written out
+    (alpha1 = pi/2, alpha5 = -pi/2, a1 = a5 = a6 = 0). Sines and cosines of the joints come from the geometry
+    (sin(acos(c)) = sqrt(1 - c^2), ...) rather than from the angles: fewer transcendental functions per pose.
+    """
+    d1, d4, d5, d6 = DH_D[0], DH_D[3], DH_D[4], DH_D[5]
+    a2, a3 = DH_A[1], DH_A[2]
+    r = np.asarray(rotation, dtype=float)
+    p = np.asarray(position, dtype=float)
+    if not isinstance(branch, int):
+        branch = np.asarray(branch)
+    shoulder, wrist_down, elbow_down = (branch >> 2) & 1, (branch >> 1) & 1, branch & 1
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = r
+    px, py, pz = p
+    # Wrist centre (origin of DH frame 5): d6 back along the flange's z axis.
+    wx, wy = px - d6 * r02, py - d6 * r12
+    radius = np.sqrt(wx * wx + wy * wy)
+    near_axis = radius < d4
+    safe_radius = np.maximum(radius, d4)
+    sin_lateral = d4 / safe_radius
+    cos_lateral = np.sqrt(1.0 - sin_lateral * sin_lateral)
+    lateral = np.arcsin(sin_lateral)
+    # theta1 = psi + lateral (shoulder 0) or psi + pi - lateral (shoulder 1), psi the wrist centre's bearing.
+    cos_psi, sin_psi = wx / safe_radius, wy / safe_radius
+    cos_turn = _choose(shoulder, -cos_lateral, cos_lateral)
+    theta1 = np.arctan2(wy, wx) + _choose(shoulder, math.pi - lateral, lateral)
+    c1 = cos_psi * cos_turn - sin_psi * sin_lateral
+    s1 = sin_psi * cos_turn + cos_psi * sin_lateral
+    # The flange z axis' component along frame 1's z axis (the parallel axes of joints 2-4) is cos(theta5).
+    c5 = np.clip(r02 * s1 - r12 * c1, -1.0, 1.0)
+    wrist_angle = np.arccos(c5)
+    s5 = np.sqrt(1.0 - c5 * c5)
+    theta5, s5 = _choose(wrist_down, -wrist_angle, wrist_angle), _choose(wrist_down, -s5, s5)
+    singular = s5 * s5 < _SINGULAR_EPS * _SINGULAR_EPS
+    s5_safe = np.where(singular, 1.0, s5)
+    x6, y6 = (r00 * s1 - r10 * c1) / s5_safe, -(r01 * s1 - r11 * c1) / s5_safe
+    theta6 = np.where(singular, wrist_singular_q6, np.arctan2(y6, x6))
+    norm6 = np.where(singular, 1.0, np.sqrt(x6 * x6 + y6 * y6))
+    norm6 = np.where(norm6 > 0.0, norm6, 1.0)  # 0 only off the arm's reach (too near the base axis)
+    c6 = np.where(singular, np.cos(wrist_singular_q6), x6 / norm6)
+    s6 = np.where(singular, np.sin(wrist_singular_q6), y6 / norm6)
+    # Column 0 of inv(T46) is (c5 c6, -c5 s6, -s5), its translation (d5 s6, d5 c6, -d6).
+    u0, u1, u2 = c5 * c6, -c5 * s6, -s5
+    v0, v1 = d5 * s6, d5 * c6
+    g0x, g0y, g0z = r00 * u0 + r01 * u1 + r02 * u2, r10 * u0 + r11 * u1 + r12 * u2, r20 * u0 + r21 * u1 + r22 * u2
+    g3x = r00 * v0 + r01 * v1 - d6 * r02 + px
+    g3y = r10 * v0 + r11 * v1 - d6 * r12 + py
+    g3z = r20 * v0 + r21 * v1 - d6 * r22 + pz
+    # inv(T01) maps (x, y, z) to (c1 x + s1 y, z - d1, ...).
+    x14, y14 = c1 * g3x + s1 * g3y, g3z - d1
+    cos3 = (x14 * x14 + y14 * y14 - a2 * a2 - a3 * a3) / (2 * a2 * a3)
+    reached = (np.abs(cos3) <= 1.0 + 1e-12) & ~near_axis
+    c3 = np.clip(cos3, -1.0, 1.0)
+    elbow_angle = np.arccos(c3)
+    s3 = np.sqrt(1.0 - c3 * c3)
+    theta3, s3 = _choose(elbow_down, -elbow_angle, elbow_angle), _choose(elbow_down, -s3, s3)
+    theta2 = np.arctan2(y14, x14) - np.arctan2(a3 * s3, a2 + a3 * c3)
+    theta4 = np.arctan2(g0z, c1 * g0x + s1 * g0y) - theta2 - theta3
+    q = np.stack(np.broadcast_arrays(theta1, theta2, theta3, theta4, theta5, theta6))
+    q[:, ~np.broadcast_to(reached, q.shape[1:])] = np.nan
+    # Differences of the other branches: pi - 2 lateral (theta1), 2 theta5 and 2 theta3, each taken modulo 2 pi.
+    separation = np.minimum(np.minimum(math.pi - 2 * lateral, math.pi - np.abs(math.pi - 2 * wrist_angle)),
+                            math.pi - np.abs(math.pi - 2 * elbow_angle))
+    return {'q': q, 'radius': radius, 'x14': x14, 'y14': y14, 'singular': singular, 'separation': separation}
+
+
+def _flange(pose: np.ndarray, tool_offset: float) -> tuple[np.ndarray, np.ndarray]:
+    """(rotation (..., 3, 3), position (..., 3)) of the flange that puts the TCP at `pose` (..., 4, 4)."""
+    rotation = pose[..., :3, :3]
+    return rotation, pose[..., :3, 3] - tool_offset * rotation[..., :, 2]
+
+
+def _all_branches(pose: np.ndarray, tool_offset: float, wrist_singular_q6: float) -> np.ndarray:
+    """The 8 branches' solutions (8, 6) at one pose, NaN where a branch does not exist; IKError when none does."""
+    rotation, position = _flange(pose, tool_offset)
+    solved = _branches(rotation, position, BRANCHES, wrist_singular_q6)
+    radius = float(solved['radius'])
+    if radius < DH_D[3]:
+        raise IKError(f'pose too close to the base axis: wrist centre {radius:.3f} m from it, '
+                      f'needs at least {DH_D[3]:.4f} m')
+    solutions = solved['q'].T
+    if np.all(np.isnan(solutions)):
+        spans = ', '.join(f'{span:.4f}' for span in np.hypot(solved['x14'], solved['y14'])[::2])
+        raise IKError(f'pose out of reach: the elbow chain would need to span {spans} m but spans at most '
+                      f'{ARM_REACH:.4f} m (TCP at {np.round(pose[:3, 3], 4).tolist()})')
+    return solutions
+
+
 def inverse_kinematics_all(pose: np.ndarray, tool_offset: float = DEFAULT_TOOL_OFFSET,
                            wrist_singular_q6: float = 0.0) -> list[np.ndarray]:
     """Every analytic solution (up to 8, each angle in (-pi, pi]) reaching `pose` with the TCP.
@@ -112,56 +218,8 @@ def inverse_kinematics_all(pose: np.ndarray, tool_offset: float = DEFAULT_TOOL_O
     pose = np.asarray(pose, dtype=float)
     if pose.shape != (4, 4):
         raise ValueError(f'expected a 4x4 pose, got shape {pose.shape}')
-    d1, d4, d5, d6 = DH_D[0], DH_D[3], DH_D[4], DH_D[5]
-    a2, a3 = DH_A[1], DH_A[2]
-    flange = pose @ _tool_transform(-tool_offset)
-    rotation = flange[:3, :3]
-    x_axis, y_axis, z_axis = rotation[:, 0], rotation[:, 1], rotation[:, 2]
-    # Wrist centre (origin of DH frame 5): d6 back along the flange's z axis.
-    wrist = flange[:3, 3] - d6 * z_axis
-    radius = math.hypot(wrist[0], wrist[1])
-    if radius < d4:
-        raise IKError(f'pose too close to the base axis: wrist centre {radius:.3f} m from it, '
-                      f'needs at least {d4:.4f} m')
-    psi = math.atan2(wrist[1], wrist[0])
-    lateral = math.asin(d4 / radius)
-    solutions: list[np.ndarray] = []
-    elbow_reach_problems: list[str] = []
-    for theta1 in (psi + lateral, psi + math.pi - lateral):
-        s1, c1 = math.sin(theta1), math.cos(theta1)
-        # z axis of frame 1 (the parallel axes of joints 2-4) in the world: the flange z axis' component along it
-        # is cos(theta5).
-        cos5 = min(1.0, max(-1.0, float(z_axis[0] * s1 - z_axis[1] * c1)))
-        for sign5 in (1.0, -1.0):
-            theta5 = sign5 * math.acos(cos5)
-            s5 = math.sin(theta5)
-            if abs(s5) < _SINGULAR_EPS:
-                theta6 = wrist_singular_q6
-            else:
-                theta6 = math.atan2(-(y_axis[0] * s1 - y_axis[1] * c1) / s5, (x_axis[0] * s1 - x_axis[1] * c1) / s5)
-            # Strip joints 1, 5 and 6 to get the planar chain of joints 2-4 in frame 1.
-            t01 = _dh_transform(theta1, d1, 0.0, DH_ALPHA[0])
-            t45 = _dh_transform(theta5, d5, 0.0, DH_ALPHA[4])
-            t56 = _dh_transform(theta6, d6, 0.0, DH_ALPHA[5])
-            t14 = _rigid_inverse(t01) @ flange @ _rigid_inverse(t45 @ t56)
-            px, py = t14[0, 3], t14[1, 3]
-            cos3 = (px * px + py * py - a2 * a2 - a3 * a3) / (2 * a2 * a3)
-            if abs(cos3) > 1.0 + 1e-12:
-                elbow_reach_problems.append(f'{math.hypot(px, py):.4f}')
-                continue
-            cos3 = min(1.0, max(-1.0, float(cos3)))
-            for sign3 in (1.0, -1.0):
-                theta3 = sign3 * math.acos(cos3)
-                theta2 = math.atan2(py, px) - math.atan2(a3 * math.sin(theta3), a2 + a3 * math.cos(theta3))
-                theta234 = math.atan2(t14[1, 0], t14[0, 0])
-                theta4 = theta234 - theta2 - theta3
-                solutions.append(np.array([_wrap(theta1), _wrap(theta2), _wrap(theta3), _wrap(theta4),
-                                           _wrap(theta5), _wrap(theta6)]))
-    if not solutions:
-        raise IKError(
-            f'pose out of reach: the elbow chain would need to span {", ".join(elbow_reach_problems)} m '
-            f'but spans at most {ARM_REACH:.4f} m (TCP at {np.round(pose[:3, 3], 4).tolist()})')
-    return solutions
+    solutions = _all_branches(pose, tool_offset, wrist_singular_q6)
+    return [_wrap_array(q) for q in solutions if not np.isnan(q[0])]
 
 
 def _nearest_within_limits(solutions: np.ndarray, seed: np.ndarray) -> np.ndarray:
@@ -172,6 +230,16 @@ def _nearest_within_limits(solutions: np.ndarray, seed: np.ndarray) -> np.ndarra
     shifted = np.where(shifted > JOINT_UPPER + 1e-9, shifted - 2 * math.pi, shifted)
     shifted = np.where(shifted < JOINT_LOWER - 1e-9, shifted + 2 * math.pi, shifted)
     return np.where((shifted >= JOINT_LOWER - 1e-9) & (shifted <= JOINT_UPPER + 1e-9), shifted, np.nan)
+
+
+def _nearest_branch(pose: np.ndarray, seed: np.ndarray, tool_offset: float) -> tuple[np.ndarray, int]:
+    """The solution nearest `seed` within the joint limits, and its branch; IKError when there is none."""
+    candidates = _nearest_within_limits(_all_branches(pose, tool_offset, _wrap(float(seed[5]))), seed)
+    distances = np.sum((candidates - seed) ** 2, axis=1)
+    if np.all(np.isnan(distances)):
+        raise IKError('every solution of the pose lies outside the joint limits')
+    branch = int(np.nanargmin(distances))
+    return candidates[branch], branch
 
 
 def inverse_kinematics(pose: np.ndarray, q_seed: Sequence[float] | None = None,
@@ -185,12 +253,77 @@ def inverse_kinematics(pose: np.ndarray, q_seed: Sequence[float] | None = None,
     seed = HOME_JOINTS if q_seed is None else np.asarray(q_seed, dtype=float)
     if seed.shape != (6,):
         raise ValueError(f'expected a seed of 6 joint angles, got shape {seed.shape}')
-    solutions = np.array(inverse_kinematics_all(pose, tool_offset, wrist_singular_q6=_wrap(float(seed[5]))))
-    candidates = _nearest_within_limits(solutions, seed)
-    distances = np.sum((candidates - seed) ** 2, axis=1)
-    if np.all(np.isnan(distances)):
-        raise IKError('every solution of the pose lies outside the joint limits')
-    return candidates[int(np.nanargmin(distances))]
+    pose = np.asarray(pose, dtype=float)
+    if pose.shape != (4, 4):
+        raise ValueError(f'expected a 4x4 pose, got shape {pose.shape}')
+    return _nearest_branch(pose, seed, tool_offset)[0]
+
+
+# Samples a path's branch is followed over at once (`inverse_kinematics_path`); after a sample that needs the full
+# search, the window starts small and doubles, so that a stretch near a singularity costs little more than before.
+_PATH_WINDOW = 16384
+
+
+def inverse_kinematics_path(poses: np.ndarray, q_seed: Sequence[float],
+                            tool_offset: float = DEFAULT_TOOL_OFFSET) -> tuple[np.ndarray, IKError | None]:
+    """Joint angles along a path of TCP poses (N, 4, 4), each the solution nearest the previous one (the first, the
+    one nearest `q_seed`): what `inverse_kinematics` called pose after pose, seeded each time with the last
+    solution, gives. Returns the solutions (M, 6) up to the first pose that cannot be reached (a transposed view of
+    a (6, M) array: `.T` gives each joint's angles contiguous), and the IKError of that pose (M its index), or None
+    when every pose is reached.
+
+    Solved in NumPy passes: the branch of the last solution is followed over a window of poses, each angle moved by
+    the multiple of 2*pi nearest the previous one, as long as that branch is provably the nearest (its step is less
+    than half its separation from every other branch, see `_branches`), within the limits and away from the wrist
+    singularity; where not, that one pose gets the full search of `inverse_kinematics`.
+    """
+    poses = np.asarray(poses, dtype=float)
+    count = len(poses)
+    rotations, positions = _flange(poses, tool_offset)
+    positions = np.ascontiguousarray(positions.T)
+    # Components first, contiguous; one rotation for all when it does not change (drawing, straight lines).
+    constant = count > 0 and bool(np.all(rotations == rotations[0]))
+    rotations = rotations[0] if constant else np.ascontiguousarray(np.moveaxis(rotations, 0, -1))
+    solutions = np.empty((6, count))  # joint first: each joint's angles contiguous
+    previous = np.asarray(q_seed, dtype=float)
+    lower, upper = JOINT_LOWER[:, None] - 1e-9, JOINT_UPPER[:, None] + 1e-9
+    done, branch, window = 0, None, 16
+    while done < count:
+        if branch is None:  # the full search, as inverse_kinematics does it
+            try:
+                previous, branch = _nearest_branch(poses[done], previous, tool_offset)
+            except IKError as error:
+                return solutions[:, :done].T, error
+            solutions[:, done] = previous
+            done += 1
+            continue
+        end = min(count, done + window)
+        solved = _branches(rotations if constant else rotations[..., done:end], positions[:, done:end], branch)
+        candidates = solved['q']  # (6, n): joint first, each row contiguous
+        # Each angle moved by the multiple of 2 pi that puts it nearest the one before.
+        turns = np.empty_like(candidates)
+        np.subtract(previous, candidates[:, 0], out=turns[:, 0])
+        np.subtract(candidates[:, :-1], candidates[:, 1:], out=turns[:, 1:])
+        turns = np.round(turns * (1 / (2 * math.pi)))
+        if np.any(turns[:, 1:]):
+            chained = candidates + (2 * math.pi) * np.cumsum(turns, axis=1)
+        else:  # the usual case: one multiple of 2 pi for the whole window
+            chained = candidates + (2 * math.pi) * turns[:, :1]
+        steps = np.empty_like(chained)
+        np.subtract(chained[:, 0], previous, out=steps[:, 0])
+        np.subtract(chained[:, 1:], chained[:, :-1], out=steps[:, 1:])
+        good = ((solved['separation'] > 2 * np.sqrt(np.einsum('ij,ij->j', steps, steps)) + 1e-9)
+                & ~solved['singular'] & np.all((chained >= lower) & (chained <= upper), axis=0))
+        accepted = int(np.argmin(good)) if not np.all(good) else end - done  # NaN columns are not good
+        solutions[:, done:done + accepted] = chained[:, :accepted]
+        if accepted:
+            previous = chained[:, accepted - 1]
+        done += accepted
+        if done < end:
+            branch, window = None, 16
+        else:
+            window = min(2 * window, _PATH_WINDOW)
+    return solutions.T, None
 
 
 def top_down_pose(xyz: Sequence[float], yaw: float = 0.0) -> np.ndarray:

@@ -20,7 +20,7 @@ from cap_ros_common.parameters import parameter
 from scipy.spatial.transform import Rotation, Slerp
 
 from cap_control.kinematics import (
-    DEFAULT_TOOL_OFFSET, JOINT_LOWER, JOINT_NAMES, JOINT_UPPER, forward_kinematics, inverse_kinematics,
+    DEFAULT_TOOL_OFFSET, JOINT_LOWER, JOINT_NAMES, JOINT_UPPER, forward_kinematics, inverse_kinematics_path,
 )
 
 # Time between the points of a timed trajectory [s]: what the arm's controller is sent.
@@ -168,36 +168,91 @@ def time_joint_path(waypoints: Sequence[Sequence[float]], limits: JointLimits = 
     return concatenate(parts)
 
 
-def _time_path_parameter(period: float, speed: float, acceleration: float, jerk: float) -> tuple[np.ndarray, ...]:
-    """Times and s(t) in [0, 1] of a jerk-limited rest-to-rest motion of one path parameter."""
-    generator = ruckig.Ruckig(1)
-    request = ruckig.InputParameter(1)
-    request.current_position = [0.0]
-    request.target_position = [1.0]
-    request.max_velocity = [speed]
-    request.max_acceleration = [acceleration]
-    request.max_jerk = [jerk]
-    timed = ruckig.Trajectory(1)
-    try:
-        result = generator.calculate(request, timed)
-    except ruckig.RuckigError:
-        # Ruckig 0.19 fails on the boundary case where full acceleration is reached exactly at full speed
-        # (acceleration^2 / jerk == speed); one percent less jerk steps off it.
-        request.max_jerk = [jerk * 0.99]
-        result = generator.calculate(request, timed)
-    if result not in (ruckig.Result.Working, ruckig.Result.Finished):
-        raise TrajectoryError(f'Ruckig could not time the Cartesian line: {result}')
-    times = _sample_times(timed.duration, period)
-    s = np.array([timed.at_time(float(t))[0][0] for t in times])
-    s[-1] = 1.0
-    return times, np.clip(s, 0.0, 1.0)
+class _PathParameterProfiles:
+    """Jerk-limited rest-to-rest motions of the path parameters s of several paths from 0 to 1, each Ruckig's
+    time-optimal one within its limits (speed, acceleration, jerk: `limits` (k, 3)), sampled every `period` and
+    exactly at the end (`_sample_times`).
+
+    Ruckig computes each profile; the samples of any run of paths are evaluated together in NumPy: each of a
+    profile's seven phases has a constant jerk, so s is a cubic in the time since the phase began (what
+    `at_time` evaluates).
+    """
+
+    def __init__(self, limits: np.ndarray, period: float):
+        self.limits, self.period = np.asarray(limits, dtype=float).reshape(-1, 3), period
+        count = len(self.limits)
+        self.durations = np.empty(count)
+        self.phases = np.empty((count, 7))  # phase durations; then the state where each phase begins:
+        self.p, self.v, self.a, self.j = (np.empty((count, 7)) for _ in range(4))
+        self.irregular: dict[int, np.ndarray] = {}  # s at the sample times of profiles not from rest
+        generator, request, timed = ruckig.Ruckig(1), ruckig.InputParameter(1), ruckig.Trajectory(1)
+        request.current_position, request.target_position = [0.0], [1.0]
+        for index, (speed, acceleration, jerk) in enumerate(self.limits.tolist()):
+            request.max_velocity, request.max_acceleration, request.max_jerk = [speed], [acceleration], [jerk]
+            try:
+                result = generator.calculate(request, timed)
+            except ruckig.RuckigError:
+                # Ruckig 0.19 fails on the boundary case where full acceleration is reached exactly at full speed
+                # (acceleration^2 / jerk == speed); one percent less jerk steps off it.
+                request.max_jerk = [jerk * 0.99]
+                result = generator.calculate(request, timed)
+            if result not in (ruckig.Result.Working, ruckig.Result.Finished):
+                raise TrajectoryError(f'Ruckig could not time the Cartesian line: {result}')
+            profile = timed.profiles[0][0]
+            self.durations[index] = timed.duration
+            self.phases[index] = profile.t
+            self.p[index], self.v[index], self.a[index] = profile.p[:-1], profile.v[:-1], profile.a[:-1]
+            self.j[index] = profile.j
+            if profile.brake.duration > 0 or profile.accel.duration > 0:
+                self.irregular[index] = np.array([timed.at_time(float(t))[0][0]
+                                                  for t in _sample_times(timed.duration, period)])
+        self.ends = np.cumsum(self.phases, axis=1)  # when each phase ends
+        self.begins = self.ends - self.phases
+        # How many samples each profile has (both ends included), as _sample_times makes them.
+        steps = np.ceil(self.durations / period).astype(int)  # of np.arange(0, duration, period)
+        sliver = (self.durations - (steps - 1) * period < 0.5 * period) & (steps > 1)
+        self.samples = steps + 1 - sliver
+
+    def sampled(self, first: int, last: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The samples of paths first to last (excluded), one after the other, each path's last sample the next
+        one's first: (times from the first path's start (R,), s (R,), the path of each sample (R,; the first
+        sample is the first path's), the sample where each path starts (and, last, where the last one ends))."""
+        counts = self.samples[first:last] - 1
+        starts = np.concatenate([[0], np.cumsum(counts)])
+        path = np.repeat(np.arange(first, last), counts)
+        index = np.arange(1, starts[-1] + 1) - np.repeat(starts[:-1], counts)  # 1 .. samples - 1 within a path
+        duration = self.durations[path]
+        at_end = index == self.samples[path] - 1
+        t = np.where(at_end, duration, index * self.period)
+        phase = np.minimum(np.count_nonzero(self.ends[path] <= t[:, None], axis=1), 6)
+        dt = t - self.begins[path, phase]
+        p, v, a, j = (table[path, phase] for table in (self.p, self.v, self.a, self.j))
+        s = np.where(at_end | (t >= duration), 1.0, p + dt * (v + dt * (a / 2 + dt * j / 6)))
+        for number, values in self.irregular.items():
+            if first <= number < last:
+                s[starts[number - first]:starts[number - first + 1]] = values[1:]
+        offsets = np.concatenate([[0.0], np.cumsum(self.durations[first:last])])
+        times = np.concatenate([[0.0], offsets[path - first] + t])
+        return times, np.concatenate([[0.0], np.clip(s, 0.0, 1.0)]), np.concatenate([[first], path]), starts
 
 
-def _finite_difference(values: np.ndarray, times: np.ndarray) -> np.ndarray:
-    if len(times) < 3:
-        return np.zeros_like(values)
-    derivative = np.gradient(values, times, axis=0)
-    derivative[0] = derivative[-1] = 0.0  # the line starts and ends at rest
+def _finite_difference(times: np.ndarray, at_rest: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """d values / d time along the last axis of what it is given (second-order central differences, np.gradient's
+    for uneven steps), zero at the samples `at_rest` (where a path starts or ends) and at both ends."""
+    before, after = np.diff(times[:-1]), np.diff(times[1:])
+    weights = (-after / (before * (before + after)), (after - before) / (before * after),
+               before / (after * (before + after)))
+
+    def derivative(values: np.ndarray) -> np.ndarray:
+        result = np.zeros_like(values)
+        if len(times) < 3:
+            return result
+        middle = result[..., 1:-1]
+        np.multiply(weights[0], values[..., :-2], out=middle)
+        middle += weights[1] * values[..., 1:-1]
+        middle += weights[2] * values[..., 2:]
+        result[..., at_rest] = 0.0
+        return result
     return derivative
 
 
@@ -231,6 +286,22 @@ def cartesian_line(q_start: Sequence[float], end_pose: np.ndarray, limits: Joint
                                 max_joint_step)
 
 
+def _path_parameter_limits(lengths: np.ndarray, angles: np.ndarray, cartesian_limits: CartesianLimits) -> np.ndarray:
+    """Speed, acceleration and jerk (k, 3) of the path parameters of paths `lengths` [m] long turning by `angles`
+    [rad]: the tighter of the linear and angular limits."""
+    speed = np.minimum(cartesian_limits.speed / np.maximum(lengths, 1e-12),
+                       cartesian_limits.angular_speed / np.maximum(angles, 1e-12))
+    straight = lengths > 1e-9
+    acceleration = np.where(straight, cartesian_limits.acceleration / np.maximum(lengths, 1e-12), speed * 4.0)
+    jerk = np.where(straight, cartesian_limits.jerk / np.maximum(lengths, 1e-12), speed * 40.0)
+    return np.column_stack([speed, acceleration, jerk])
+
+
+# Samples solved in one pass of timed_cartesian_paths: bounds the memory of a long request, and how long it goes
+# without looking whether it was interrupted.
+_SAMPLES_PER_PASS = 20000
+
+
 def timed_cartesian_path(q_start: Sequence[float], poses_at: Callable[[np.ndarray], np.ndarray], length: float,
                          angle: float = 0.0, limits: JointLimits = UR5E_LIMITS,
                          cartesian_limits: CartesianLimits = CartesianLimits(), period: float = DEFAULT_PERIOD,
@@ -244,35 +315,107 @@ def timed_cartesian_path(q_start: Sequence[float], poses_at: Callable[[np.ndarra
     acceleration). Raises TrajectoryError if a sample leaves the IK branch (a joint jumps by more than
     `max_joint_step` [rad] between samples) and IKError if a sample is out of reach.
     """
-    q_start = np.asarray(q_start, dtype=float)
-    # Path-parameter limits: the tighter of the linear and angular ones.
-    speed = min(cartesian_limits.speed / max(length, 1e-12), cartesian_limits.angular_speed / max(angle, 1e-12))
-    acceleration = cartesian_limits.acceleration / max(length, 1e-12) if length > 1e-9 else speed * 4.0
-    jerk = cartesian_limits.jerk / max(length, 1e-12) if length > 1e-9 else speed * 40.0
-    for _ in range(20):
-        times, s = _time_path_parameter(period, speed, acceleration, jerk)
-        positions = np.empty((len(times), 6))
-        previous = q_start
-        for k, pose in enumerate(poses_at(s)):
-            q = inverse_kinematics(pose, q_seed=previous, tool_offset=tool_offset)
-            step = float(np.max(np.abs(q - previous)))
-            if step > max_joint_step:
-                raise TrajectoryError(
-                    f'the path would flip the arm configuration at {np.round(pose[:3, 3], 3).tolist()} '
-                    f'(a joint jumps by {step:.2f} rad between samples)')
-            positions[k] = q
-            previous = q
-        positions[0] = q_start  # the path starts exactly where the arm is
-        velocities = _finite_difference(positions, times)
-        accelerations = _finite_difference(velocities, times)
-        ratio = max(float(np.max(np.abs(velocities) / limits.velocity)),
-                    math.sqrt(float(np.max(np.abs(accelerations) / limits.acceleration))))
-        if ratio <= 1.0:
-            return JointTrajectory(times, positions, velocities, accelerations)
-        # Too fast for a joint (near a singularity): slow the whole path and time it again.
+    return timed_cartesian_paths(q_start, lambda _, s: poses_at(s), [length], [angle], limits, cartesian_limits,
+                                 period, tool_offset, max_joint_step)
+
+
+def timed_cartesian_paths(q_start: Sequence[float], poses_at: Callable[[np.ndarray, np.ndarray], np.ndarray],
+                          lengths: Sequence[float], angles: Sequence[float] | None = None,
+                          limits: JointLimits = UR5E_LIMITS, cartesian_limits: CartesianLimits = CartesianLimits(),
+                          period: float = DEFAULT_PERIOD, tool_offset: float = DEFAULT_TOOL_OFFSET,
+                          max_joint_step: float = 0.1,
+                          check_interrupted: Callable[[], None] = lambda: None) -> JointTrajectory:
+    """One trajectory through several Cartesian paths one after the other, each from where the previous one ends
+    (the first from `q_start`), each as `timed_cartesian_path` times it: from rest to rest, slowed down on its own
+    until the joints respect `limits`. No paths: at rest at `q_start`.
+
+    `poses_at(path, s)` gives the TCP poses (N, 4, 4) of paths `path` (N, indices) at their path parameters s (N,)
+    in [0, 1]; path k at s = 0 is where path k - 1 ends. `lengths` [m] and `angles` [rad] (none: 0) are each path's
+    length and total turn. The paths are solved together, some ten thousand samples per NumPy pass, so that
+    thousands of short paths take a time linear in their samples; `check_interrupted` is called before each pass
+    (it raises to abandon the work).
+    """
+    lengths = np.asarray(lengths, dtype=float)
+    angles = np.zeros_like(lengths) if angles is None else np.asarray(angles, dtype=float)
+    check_interrupted()
+    profiles = _PathParameterProfiles(_path_parameter_limits(lengths, angles, cartesian_limits), period)
+    q = np.asarray(q_start, dtype=float)
+    parts = [_at_rest(q)]
+    first = 0
+    while first < len(lengths):
+        check_interrupted()
+        # Paths up to some ten thousand samples (at least one path).
+        last = first + max(1, int(np.searchsorted(np.cumsum(profiles.samples[first:]), _SAMPLES_PER_PASS)))
+        trajectory, starts, ratios = _solve_timed(q, poses_at, profiles, first, last, limits, tool_offset,
+                                                  max_joint_step)
+        taken = 0  # paths of the pass taken so far
+        for index in np.flatnonzero(ratios > 1.0).tolist():
+            parts.append(_rows(trajectory, starts[taken], starts[index]))
+            slowed = _slowed(parts[-1].end, poses_at, first + index, profiles.limits[first + index],
+                             float(ratios[index]), period, limits, tool_offset, max_joint_step, check_interrupted)
+            parts.append(slowed)
+            taken = index + 1
+            if not np.array_equal(slowed.end, trajectory.positions[starts[index + 1]]):
+                break  # it ended elsewhere than the pass assumed: the rest is solved again from there
+        else:
+            parts.append(_rows(trajectory, starts[taken], starts[-1]))
+            taken = last - first
+        first += taken
+        q = parts[-1].end
+    return concatenate(parts)
+
+
+def _slowed(q_start: np.ndarray, poses_at: Callable[[np.ndarray, np.ndarray], np.ndarray], path: int,
+            path_limits: np.ndarray, ratio: float, period: float, limits: JointLimits, tool_offset: float,
+            max_joint_step: float, check_interrupted: Callable[[], None]) -> JointTrajectory:
+    """A path too fast for a joint (near a singularity) slowed down as a whole and timed again until it is not."""
+    speed, acceleration, jerk = path_limits
+    for _ in range(19):
+        check_interrupted()
         slow_down = 0.9 / ratio
         speed, acceleration, jerk = speed * slow_down, acceleration * slow_down ** 2, jerk * slow_down ** 3
+        profile = _PathParameterProfiles(np.array([speed, acceleration, jerk]), period)
+        trajectory, _, ratios = _solve_timed(q_start, lambda _, s: poses_at(np.full(len(s), path), s), profile, 0,
+                                             1, limits, tool_offset, max_joint_step)
+        ratio = float(ratios[0])
+        if ratio <= 1.0:
+            return trajectory
     raise TrajectoryError('the path cannot be made slow enough for the joint limits (singularity?)')
+
+
+def _rows(trajectory: JointTrajectory, first: int, last: int) -> JointTrajectory:
+    """Samples first to last (included) of a trajectory, as a trajectory starting at time 0."""
+    rows = slice(first, last + 1)
+    return JointTrajectory(trajectory.times[rows] - trajectory.times[first], trajectory.positions[rows],
+                           trajectory.velocities[rows], trajectory.accelerations[rows])
+
+
+def _solve_timed(q_start: np.ndarray, poses_at: Callable[[np.ndarray, np.ndarray], np.ndarray],
+                 profiles: _PathParameterProfiles, first: int, last: int, limits: JointLimits, tool_offset: float,
+                 max_joint_step: float) -> tuple[JointTrajectory, np.ndarray, np.ndarray]:
+    """Paths first to last (excluded) at their profiles' samples, solved by IK one after the other (the first
+    from `q_start`): the trajectory through them all, the sample where each path starts (and, last, where the last
+    one ends), and the ratio of each path's fastest joint to the limits (above 1: too fast)."""
+    times, s, path, starts = profiles.sampled(first, last)
+    poses = poses_at(path[1:], s[1:])  # the first sample is where the arm is
+    solutions, unreachable = inverse_kinematics_path(poses, q_start, tool_offset)
+    # Joint first (6, N) from here on: each joint's samples contiguous, reductions over joints fast.
+    positions = np.concatenate([q_start[:, None], solutions.T], axis=1)
+    steps = np.max(np.abs(np.diff(positions, axis=1)), axis=0)
+    if np.any(steps > max_joint_step):
+        jump = int(np.argmax(steps > max_joint_step))
+        raise TrajectoryError(
+            f'the path would flip the arm configuration at {np.round(poses[jump, :3, 3], 3).tolist()} '
+            f'(a joint jumps by {steps[jump]:.2f} rad between samples)')
+    if unreachable is not None:
+        raise unreachable
+    derivative = _finite_difference(times, starts)  # every path starts and ends at rest
+    velocities = derivative(positions)
+    accelerations = derivative(velocities)
+    ratio = np.maximum(np.max(np.abs(velocities) / limits.velocity[:, None], axis=0),
+                       np.sqrt(np.max(np.abs(accelerations) / limits.acceleration[:, None], axis=0)))
+    return (JointTrajectory(times, positions.T, velocities.T, accelerations.T), starts,
+            np.maximum.reduceat(ratio, starts[:-1]))
 
 
 def trajectory_tcp_positions(trajectory: JointTrajectory, tool_offset: float = DEFAULT_TOOL_OFFSET) -> np.ndarray:
@@ -283,5 +426,5 @@ def trajectory_tcp_positions(trajectory: JointTrajectory, tool_offset: float = D
 __all__ = [
     'CartesianLimits', 'DEFAULT_PERIOD', 'JointLimits', 'JointTrajectory', 'TrajectoryError',
     'UR5E_LIMITS', 'cartesian_line', 'concatenate', 'time_joint_path', 'timed_cartesian_path',
-    'trajectory_tcp_positions',
+    'timed_cartesian_paths', 'trajectory_tcp_positions',
 ]

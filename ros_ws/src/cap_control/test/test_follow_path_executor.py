@@ -1,10 +1,11 @@
 """The path executor over fake ports: what it sends, and how it ends on a lost contact, a stop, a refused path."""
 import threading
+import time
 from concurrent.futures import Future
 
 import numpy as np
 
-from cap_control.follow_path.executor import PathExecutor, PathRequest, PathTimeouts, ToolSpring
+from cap_control.follow_path.executor import MAX_GOAL_SAMPLES, PathExecutor, PathRequest, PathTimeouts, ToolSpring
 from cap_control.follow_path.plan import PathErrorCode
 from cap_control.ports import Arm, ArmOutcome, ArmResult, Ending, Interruption, PendingGoal
 
@@ -53,6 +54,7 @@ class FakeArm(Arm, ToolSpring):
 
     def __init__(self, compression: float = 0.003):
         self.goals: list[tuple[Goal, float | None]] = []
+        self.trajectories = []
         self.compressed = compression
         self.now = 0.0
 
@@ -72,6 +74,7 @@ class FakeArm(Arm, ToolSpring):
     def follow(self, trajectory, contact_tolerance, goal_tolerance=None) -> PendingGoal:
         goal = Goal(trajectory.duration, self)
         self.goals.append((goal, goal_tolerance))
+        self.trajectories.append(trajectory)
         return goal
 
     def compression(self, tool):
@@ -133,3 +136,32 @@ def test_a_stop_cancels_the_motion_in_progress():
     assert outcome.ending == Ending.STOPPED and outcome.code == PathErrorCode.CANCELLED
     assert 'stopped by cap/stop' in outcome.message
     assert len(arm.goals) <= 4
+
+
+def _scribble(count: int) -> list[np.ndarray]:
+    """`count` points all over the board: thousands of corners, hours of drawing."""
+    rng = np.random.default_rng(0)
+    return [np.column_stack([rng.uniform(-0.23, 0.23, count), rng.uniform(-0.68, -0.32, count)])]
+
+
+def test_a_stop_while_planning_ends_the_run_at_once_with_nothing_sent():
+    arm = FakeArm()
+    interruption = Interruption()
+    threading.Timer(0.05, interruption.stop).start()
+    started = time.monotonic()
+    outcome = PathExecutor(arm, arm, stop_source='cap/stop').run(PathRequest(_scribble(5000), 'marker'), interruption)
+    assert outcome.ending == Ending.STOPPED and outcome.code == PathErrorCode.CANCELLED
+    assert time.monotonic() - started < 0.5
+    assert arm.goals == []
+
+
+
+def test_a_long_stroke_goes_to_the_arm_a_part_at_a_time_each_from_rest_to_rest():
+    arm = FakeArm()
+    zigzag = [np.array([[-0.2 + 0.4 * (i % 2), -0.6 + 0.002 * i] for i in range(60)])]
+    outcome = PathExecutor(arm, arm).run(PathRequest(zigzag, 'marker'), Interruption())
+    assert outcome.ending == Ending.SUCCEEDED, outcome.message
+    follows = arm.trajectories[2:-2]  # after the travel and the landing; before the lift and the park
+    assert len(follows) > 1 and max(len(t) for t in follows) <= MAX_GOAL_SAMPLES
+    assert all(not np.any(t.velocities[[0, -1]]) for t in follows)
+    assert sum(t.duration for t in follows) > 60 * 0.4 / 0.1  # the whole stroke: 59 strokes of 40 cm at 0.1 m/s

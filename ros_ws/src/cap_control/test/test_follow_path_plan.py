@@ -1,15 +1,16 @@
 """Planning a tool's path over the whiteboard: checks before anything moves, timing, reach, tool orientation."""
 import math
+import time
 
 import numpy as np
 import pytest
 
 from cap_control.kinematics import forward_kinematics
 from cap_control.follow_path.plan import (
-    PathConfig, PathError, PathErrorCode, StepKind, Surface, plan_path, resample, split_at_corners,
+    PathConfig, PathError, PathErrorCode, StepKind, Surface, plan_path, resample, rest_parts, split_at_corners,
     tool_tip_positions,
 )
-from cap_control.trajectory import UR5E_LIMITS
+from cap_control.trajectory import UR5E_LIMITS, concatenate
 from cap_whiteboard import board, tool
 
 READY = np.array([0.8413, -2.2842, 1.7017, -0.9883, -1.5708, -0.7295])
@@ -81,3 +82,39 @@ def test_sharp_corners_stop_the_tool_and_a_moving_tool_never_touches_down_off_th
     # Between strokes the tool travels at travel height.
     travel = tool_tip_positions(plan.steps[4].trajectory, 'marker')
     assert np.all(travel[:, 2] >= board.SURFACE_Z + PathConfig().travel_height - 1e-6)
+
+
+def test_the_largest_stroke_plans_in_well_under_two_seconds():
+    rng = np.random.default_rng(0)  # 5,000 points all over the board: thousands of corners, hours of drawing
+    scribble = np.column_stack([rng.uniform(-0.23, 0.23, 5000), rng.uniform(-0.68, -0.32, 5000)])
+    started = time.process_time()
+    plan = plan_path(READY, [scribble], 'marker')
+    assert time.process_time() - started < 2.0
+    assert plan.points_total == 5000 and plan.duration > 3600
+
+
+def test_planning_looks_for_an_interruption_between_passes():
+    calls = []
+
+    def check_interrupted():
+        calls.append(len(calls))
+        if len(calls) == 3:
+            raise InterruptedError
+
+    rng = np.random.default_rng(1)
+    scribble = np.column_stack([rng.uniform(-0.23, 0.23, 2000), rng.uniform(-0.68, -0.32, 2000)])
+    with pytest.raises(InterruptedError):
+        plan_path(READY, [scribble], 'marker', check_interrupted=check_interrupted)
+    assert len(calls) == 3
+
+
+def test_a_long_stroke_is_cut_where_it_stops_into_parts_that_make_it_up():
+    zigzag = np.array([[-0.2 + 0.4 * (i % 2), -0.6 + 0.002 * i] for i in range(60)])
+    follow = plan_path(READY, [zigzag], 'marker').steps[2].trajectory
+    parts = rest_parts(follow, 400)
+    assert len(parts) > 1 and max(len(part) for part in parts) <= 400
+    for part in parts:
+        assert part.times[0] == 0.0 and not np.any(part.velocities[[0, -1]])
+    joined = concatenate(parts)
+    assert np.array_equal(joined.positions, follow.positions) and np.allclose(joined.times, follow.times)
+    assert rest_parts(follow, len(follow)) == [follow]

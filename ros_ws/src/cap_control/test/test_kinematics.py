@@ -9,7 +9,8 @@ from cap_tabletop.workspace import CORNERS, MIDDLE, SIDES, TABLE_X_RANGE, TABLE_
 
 from cap_control.kinematics import (
     ARM_REACH, HOME_JOINTS, JOINT_LOWER, JOINT_UPPER, IKError, forward_kinematics, inverse_kinematics,
-    inverse_kinematics_all, is_reachable_top_down, pose_error, top_down_pose, top_down_reach_margin,
+    inverse_kinematics_all, inverse_kinematics_path, is_reachable_top_down, pose_error, top_down_pose,
+    top_down_reach_margin,
 )
 
 TABLE_X = TABLE_X_RANGE
@@ -116,3 +117,29 @@ def test_reach_margin_matches_where_ik_starts_failing():
         assert top_down_reach_margin((*((edge - 0.001) * direction), height)) > 0
         assert top_down_reach_margin((*((edge + 0.001) * direction), height)) < 0
     assert ARM_REACH == pytest.approx(0.8172)
+
+
+@pytest.mark.parametrize('kind', ['line over the table', 'joint sweep through the wrist singularity', 'out of reach'])
+def test_a_path_is_solved_as_pose_by_pose_ik_seeded_with_the_last_solution(kind):
+    rng = np.random.default_rng(len(kind))
+    steps = np.linspace(0.0, 1.0, 400)[:, None]
+    if kind == 'line over the table':
+        poses = [top_down_pose((-0.3 + 0.6 * s, -0.4 - 0.2 * s, 0.1), 0.7) for s in steps[:, 0]]
+    elif kind == 'joint sweep through the wrist singularity':
+        start = rng.uniform(JOINT_LOWER, JOINT_UPPER) * 0.5
+        end = start.copy()
+        start[4], end[4] = -0.4, 0.4
+        poses = [forward_kinematics(q) for q in start + steps * (end - start)]
+    else:
+        poses = [top_down_pose((0.0, -0.5 - 0.8 * s, 0.1)) for s in steps[:, 0]]
+    seed = rng.uniform(JOINT_LOWER, JOINT_UPPER)
+    expected, previous = [], seed
+    for pose in poses:
+        try:
+            previous = inverse_kinematics(pose, previous)
+        except IKError:
+            break
+        expected.append(previous)
+    solutions, error = inverse_kinematics_path(np.array(poses), seed)
+    assert len(solutions) == len(expected) and (error is None) == (len(expected) == len(poses))
+    np.testing.assert_allclose(solutions, np.array(expected).reshape(-1, 6), atol=1e-12)

@@ -54,3 +54,16 @@ def test_the_reference_session_draws_erases_and_remembers_its_shapes():
 def test_draw_refuses_what_is_not_a_stroke_with_a_clear_error(bad, words):
     with pytest.raises(RobotApiError, match=words.replace('[', r'\[').replace('(', r'\(').replace(')', r'\)')):
         stroke_points(bad, 'draw')
+
+
+def test_a_stopped_motion_that_never_answers_names_the_wait_after_the_cancel():
+    import threading
+    from concurrent.futures import Future
+
+    from cap_lmp_ros.domains.ros_api import wait_for_future
+
+    stop, cancels = threading.Event(), []
+    stop.set()
+    with pytest.raises(RobotApiError, match=r'within 0.05 s of the cancel'):
+        wait_for_future(Future(), 180.0, 'the path-following controller', stop, 0.05, lambda: cancels.append(1))
+    assert cancels

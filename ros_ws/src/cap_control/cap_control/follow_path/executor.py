@@ -1,7 +1,8 @@
 """Carrying out a FollowPath request over ports to the arm and the tool's spring (plain Python, no ROS).
 
 `PathExecutor.run` plans the whole path from the arm's joints before anything moves (cap_control.follow_path.plan:
-a path off the surface or out of reach fails with nothing moved), then runs its motions one by one, reporting each
+a path off the surface or out of reach fails with nothing moved; a cancel or a stop while it plans ends the run
+within one planning pass, a few hundredths of a second), then runs its motions one by one, reporting each
 with the stroke, the points passed and the progress by length. With a touching tool it checks the tool's spring,
 which the robot reports as a joint: after each landing the compression must come into the tool's band (the tool
 touches the surface), and while a stroke is followed it must stay there (a tool that lifts off, or presses so hard
@@ -20,7 +21,7 @@ from cap_ros_common.parameters import parameter
 from cap_whiteboard import tool as tools
 
 from cap_control.follow_path.plan import (
-    TOOL_NONE, PathConfig, PathError, PathErrorCode, PathPlan, PathStep, StepKind, plan_path,
+    TOOL_NONE, PathConfig, PathError, PathErrorCode, PathPlan, PathStep, StepKind, plan_path, rest_parts,
 )
 from cap_control.ports import (
     Arm, ArmOutcome, ArmResult, Ending, Failed, GoalRun, Interrupted, Interruption, WaitTimeouts,
@@ -34,6 +35,10 @@ CONTACT_LOOKS = 3
 # The goal tolerance of motions that press the tool on the surface [rad]: the spring's push bends the wrist a few
 # milliradians off the commanded joints (more than the controller's default of 2 mrad with the side-mounted eraser).
 CONTACT_GOAL_TOLERANCE = 0.008
+# Samples of a stroke's motion sent to the arm in one goal, where the stroke stops often enough (1 minute of motion):
+# building and sending a goal takes some 15 us per sample here and in the controller, so a stop waits at most about
+# 50 ms for the goal in flight. A stroke with hours of corners goes a part at a time.
+MAX_GOAL_SAMPLES = 3000
 
 
 @dataclass(frozen=True)
@@ -144,7 +149,9 @@ class _Run(GoalRun):
     def plan(self, request: PathRequest) -> PathPlan:
         joints = self.wait(self.arm.joints(), self.timeouts.server_timeout,
                            f'{self.arm.joints_description} is not available')
-        return plan_path(joints, request.strokes, request.tool, request.speed, self.executor.config)
+        # A cancel or a stop ends a long plan at its next pass, with nothing sent.
+        return plan_path(joints, request.strokes, request.tool, request.speed, self.executor.config,
+                         check_interrupted=self.check_interrupted)
 
     def execute(self, plan: PathPlan, feedback: FeedbackCallback) -> None:
         total = max(plan.length_total, 1e-12)
@@ -161,25 +168,33 @@ class _Run(GoalRun):
                               plan.points_total, 1.0))
 
     def move(self, step: PathStep, plan: PathPlan, feedback: FeedbackCallback) -> None:
-        trajectory = step.trajectory
-        if len(trajectory) < 2:
+        if len(step.trajectory) < 2:
             return
-        self.available(self.arm.server_ready(), self.arm.server_description)
         pressing = self.band is not None and step.kind in (StepKind.DESCEND, StepKind.FOLLOW)
-        goal = self.arm.follow(trajectory, None, CONTACT_GOAL_TOLERANCE if pressing else None)
-        self.send(goal, 'the arm controller', 'the arm controller refused the trajectory')
-        timeout = trajectory.duration + self.timeouts.motion_timeout_margin
-        if step.kind == StepKind.FOLLOW:
-            outcome = self.follow(goal.result, timeout, step, plan, feedback)
-        else:
-            outcome = self.answer(goal.result, timeout, 'the arm controller')
-        self.active = None
-        if outcome.result != ArmResult.SUCCEEDED:
-            raise Failed(PathErrorCode.CONTROLLER_FAILED, f'the arm did not complete its motion: {outcome.message}')
+        # A long stroke goes to the arm a part at a time, each ending where the tool stops at a corner anyway: no
+        # goal takes long to build and send, so a stop is never kept waiting behind one.
+        parts = rest_parts(step.trajectory, MAX_GOAL_SAMPLES) if step.kind == StepKind.FOLLOW else [step.trajectory]
+        done = 0.0  # [s] of the step's trajectory
+        for trajectory in parts:
+            self.check_interrupted()
+            self.available(self.arm.server_ready(), self.arm.server_description)
+            goal = self.arm.follow(trajectory, None, CONTACT_GOAL_TOLERANCE if pressing else None)
+            self.send(goal, 'the arm controller', 'the arm controller refused the trajectory')
+            timeout = trajectory.duration + self.timeouts.motion_timeout_margin
+            if step.kind == StepKind.FOLLOW:
+                outcome = self.follow(goal.result, timeout, step, plan, feedback, done)
+            else:
+                outcome = self.answer(goal.result, timeout, 'the arm controller')
+            self.active = None
+            if outcome.result != ArmResult.SUCCEEDED:
+                raise Failed(PathErrorCode.CONTROLLER_FAILED,
+                             f'the arm did not complete its motion: {outcome.message}')
+            done += trajectory.duration
 
     def follow(self, result, timeout: float, step: PathStep, plan: PathPlan,
-               feedback: FeedbackCallback) -> ArmOutcome:
-        """Wait for a stroke's motion, checking the spring and reporting progress as it goes."""
+               feedback: FeedbackCallback, done_before: float = 0.0) -> ArmOutcome:
+        """Wait for (a part of) a stroke's motion, beginning `done_before` seconds into the stroke's trajectory,
+        checking the spring and reporting progress as it goes."""
         deadline = time.monotonic() + timeout
         started = self.spring.state_time()
         out_of_band = 0
@@ -199,7 +214,7 @@ class _Run(GoalRun):
                 continue
             last_stamp = stamp
             if started is not None and step.trajectory.duration > 0:
-                done = min(1.0, max(0.0, (stamp - started) / step.trajectory.duration))
+                done = min(1.0, max(0.0, (stamp - started + done_before) / step.trajectory.duration))
                 feedback(PathProgress(step.kind.value, step.stroke, step.points_before + int(done * step.points),
                                       plan.points_total, min(1.0, (step.length_before + done * step.length) / total)))
             if self.band is None:
@@ -237,5 +252,5 @@ class _Run(GoalRun):
                      f'{low * 1000:.1f}-{high * 1000:.1f} mm)')
 
 
-__all__ = ['CONTACT_CHECK_PERIOD', 'FeedbackCallback', 'PathExecutor', 'PathOutcome', 'PathProgress',
-           'PathRequest', 'PathTimeouts', 'ToolSpring']
+__all__ = ['CONTACT_CHECK_PERIOD', 'FeedbackCallback', 'MAX_GOAL_SAMPLES', 'PathExecutor', 'PathOutcome',
+           'PathProgress', 'PathRequest', 'PathTimeouts', 'ToolSpring']

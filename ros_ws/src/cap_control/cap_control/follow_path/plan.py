@@ -16,6 +16,13 @@ piece is timed along its length by Ruckig (jerk-limited, from rest to rest, at t
 polygon's corners are sharp (the tool stops at each) and a circle is drawn in one sweep. Every sample is solved by
 IK seeded with the previous one (no branch flips: a joint jump above `max_joint_step` fails the plan), and a piece
 that would need a joint faster than the UR5e's limits is slowed down as a whole. No ROS here.
+
+Cost. Planning takes a time linear in the samples (the path's length over `step`, and its duration over the
+trajectory's period): they are solved in NumPy passes of twenty thousand (cap_control.kinematics.
+inverse_kinematics_path, cap_control.trajectory.timed_cartesian_paths), some 0.05 s per 100,000 samples: 5,000
+points all over the board (hours of drawing) in about half a second, 1.2 s for the longest path 5,000 points make
+(corner to far corner and back). Between passes the plan calls `check_interrupted`, so that a cancel or a stop ends
+it within a few hundredths of a second.
 """
 from __future__ import annotations
 
@@ -23,16 +30,18 @@ import dataclasses
 import enum
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from cap_ros_common.parameters import parameter
 from cap_whiteboard import board, tool as tools
 
-from cap_control.kinematics import HOME_JOINTS, IKError, forward_kinematics, inverse_kinematics, top_down_pose
+from cap_control.kinematics import (
+    HOME_JOINTS, IKError, forward_kinematics, inverse_kinematics, inverse_kinematics_path, top_down_pose,
+)
 from cap_control.trajectory import (
-    CartesianLimits, JointLimits, JointTrajectory, TrajectoryError, UR5E_LIMITS, cartesian_line, concatenate,
-    time_joint_path, timed_cartesian_path,
+    CartesianLimits, JointLimits, JointTrajectory, TrajectoryError, UR5E_LIMITS, cartesian_line,
+    time_joint_path, timed_cartesian_paths,
 )
 
 TOOL_NONE = 'none'
@@ -83,9 +92,14 @@ class Surface:
     margin: float = parameter(board.DRAW_MARGIN, 'Path points must keep this far inside the edges [m].')
 
     def contains(self, x: float, y: float) -> bool:
+        return bool(self.contains_all(np.array([[x, y]]))[0])
+
+    def contains_all(self, points: np.ndarray) -> np.ndarray:
+        """Whether each point (N, 2) lies on the surface, `margin` inside its edges."""
         slack = 1e-9  # a point computed exactly on the limit (-0.64 - 0.05) is on it
-        return (self.x_min + self.margin - slack <= x <= self.x_max - self.margin + slack
-                and self.y_min + self.margin - slack <= y <= self.y_max - self.margin + slack)
+        x, y = points[:, 0], points[:, 1]
+        return ((self.x_min + self.margin - slack <= x) & (x <= self.x_max - self.margin + slack)
+                & (self.y_min + self.margin - slack <= y) & (y <= self.y_max - self.margin + slack))
 
     def describe(self) -> str:
         return (f'x in [{self.x_min + self.margin:.3f}, {self.x_max - self.margin:.3f}] m, '
@@ -191,12 +205,13 @@ def choose_yaw(tool: str, points: np.ndarray, z: float) -> float:
 
 def resample(points: np.ndarray, step: float) -> np.ndarray:
     """The polyline through `points` (N, 2) with points every `step` or less along it, every vertex kept."""
-    out = [points[0]]
-    for start, end in zip(points[:-1], points[1:]):
-        count = max(1, int(math.ceil(float(np.linalg.norm(end - start)) / step)))
-        fractions = np.arange(1, count + 1) / count
-        out.extend(start + fractions[:, None] * (end - start))
-    return np.array(out)
+    starts, ends = points[:-1], points[1:]
+    counts = np.maximum(1, np.ceil(np.linalg.norm(ends - starts, axis=1) / step)).astype(int)
+    segment = np.repeat(np.arange(len(counts)), counts)
+    # 1, 2, ..., count within each segment: the fraction of the way along it is that over count.
+    index = np.arange(len(segment)) - np.repeat(np.cumsum(counts) - counts, counts) + 1
+    fractions = index / counts[segment]
+    return np.vstack([points[:1], starts[segment] + fractions[:, None] * (ends[segment] - starts[segment])])
 
 
 def polyline_length(points: np.ndarray) -> float:
@@ -206,18 +221,23 @@ def polyline_length(points: np.ndarray) -> float:
 def split_at_corners(points: np.ndarray, corner_angle: float) -> list[np.ndarray]:
     """Pieces of the polyline (each sharing its end point with the next) cut where it turns by more than
     `corner_angle`; repeated points are dropped first."""
-    keep = [0] + [i for i in range(1, len(points)) if np.linalg.norm(points[i] - points[i - 1]) > 1e-9]
-    points = points[keep]
+    points, cuts = corners(points, corner_angle)
     if len(points) < 3:
         return [points]
-    cuts = [0]
-    for i in range(1, len(points) - 1):
-        a, b = points[i] - points[i - 1], points[i + 1] - points[i]
-        cos = float(np.dot(a, b) / (np.linalg.norm(a) * np.linalg.norm(b)))
-        if math.acos(max(-1.0, min(1.0, cos))) > corner_angle:
-            cuts.append(i)
-    cuts.append(len(points) - 1)
     return [points[start:end + 1] for start, end in zip(cuts[:-1], cuts[1:])]
+
+
+def corners(points: np.ndarray, corner_angle: float) -> tuple[np.ndarray, np.ndarray]:
+    """The polyline without repeated points, and the indices where its pieces begin and end: its ends and where
+    it turns by more than `corner_angle` (see split_at_corners)."""
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(points, axis=0), axis=1) > 1e-9])
+    points = points[keep]
+    if len(points) < 3:
+        return points, np.array([0, len(points) - 1])
+    a, b = points[1:-1] - points[:-2], points[2:] - points[1:-1]
+    cos = np.sum(a * b, axis=1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+    turns = np.flatnonzero(np.arccos(np.clip(cos, -1.0, 1.0)) > corner_angle) + 1
+    return points, np.concatenate([[0], turns, [len(points) - 1]])
 
 
 # ----------------------------------------------------------------------------------------------- checks
@@ -238,35 +258,69 @@ def check_strokes(strokes: Sequence[np.ndarray], surface: Surface) -> list[np.nd
             raise PathError(PathErrorCode.INVALID_PATH, f'the path has more than {MAX_POINTS} points')
         if not np.all(np.isfinite(points)):
             raise PathError(PathErrorCode.INVALID_PATH, f'stroke {index} has a point that is not a finite number')
-        for point in points:
-            if not surface.contains(float(point[0]), float(point[1])):
-                raise PathError(PathErrorCode.OUTSIDE_WORKSPACE,
-                                f'the point ({point[0]:.3f}, {point[1]:.3f}) of stroke {index} is off the board: '
-                                f'points must lie within {surface.describe()}')
+        inside = surface.contains_all(points)
+        if not np.all(inside):
+            point = points[int(np.argmin(inside))]
+            raise PathError(PathErrorCode.OUTSIDE_WORKSPACE,
+                            f'the point ({point[0]:.3f}, {point[1]:.3f}) of stroke {index} is off the board: '
+                            f'points must lie within {surface.describe()}')
         checked.append(points)
     return checked
 
 
-def _solve(tool: str, samples: np.ndarray, z: float, yaw: float, q_seed: np.ndarray,
-           max_joint_step: float) -> tuple[list[np.ndarray], int]:
-    """IK along `samples` (N, 2) at height z, seeded point to point; (solutions, index of the first failure or N)."""
-    solutions, previous = [], q_seed
-    for index, (x, y) in enumerate(samples):
-        try:
-            q = inverse_kinematics(flange_pose(tool, (x, y, z), yaw), q_seed=previous, tool_offset=0.0)
-        except IKError:
-            return solutions, index
-        if solutions and float(np.max(np.abs(q - previous))) > max_joint_step:
-            return solutions, index
-        solutions.append(q)
-        previous = q
-    return solutions, len(samples)
+def flange_poses(tool: str, points: np.ndarray, z: float, yaw: float) -> np.ndarray:
+    """`flange_pose` at each point (N, 2) at height z: (N, 4, 4)."""
+    poses = np.repeat(flange_pose(tool, (0.0, 0.0, z), yaw)[None], len(points), axis=0)
+    poses[:, :2, 3] += points
+    return poses
+
+
+# Samples of a stroke solved in one pass, between looks at whether the request was interrupted.
+SAMPLES_PER_PASS = 20000
+
+
+def _reach(tool: str, stroke: np.ndarray, z: float, yaw: float, q_seed: np.ndarray, config: PathConfig,
+           check_interrupted: Callable[[], None]) -> tuple[np.ndarray, tuple[np.ndarray, float] | None]:
+    """IK along the stroke resampled every `config.step` at height z, seeded sample to sample (the first with
+    `q_seed`), some ten thousand samples at a time: (the last solution, None), or (the solution before, (the first
+    sample that fails, the stroke's length up to the sample before it)). A sample fails where it cannot be reached
+    or a joint jumps more than `max_joint_step` from the sample before (the first may be any distance from the
+    seed)."""
+    counts = np.maximum(1, np.ceil(np.linalg.norm(np.diff(stroke, axis=0), axis=1) / config.step)).astype(int)
+    groups, first, size = [], 0, 0  # runs of segments with some SAMPLES_PER_PASS samples
+    for segment, count in enumerate(counts.tolist()):
+        size += count
+        if size >= SAMPLES_PER_PASS:
+            groups.append((first, segment + 1))
+            first, size = segment + 1, 0
+    if first < len(counts) or not groups:
+        groups.append((first, len(counts)))
+    q, solved_length = np.asarray(q_seed, dtype=float), 0.0
+    for number, (first, last) in enumerate(groups):
+        check_interrupted()
+        samples = resample(stroke[first:last + 1], config.step)
+        done = 0 if number == 0 else 1  # a later run's first sample is the run before's last
+        solutions, _ = inverse_kinematics_path(flange_poses(tool, samples[done:], z, yaw), q, tool_offset=0.0)
+        steps = np.max(np.abs(np.diff(np.concatenate([q[:, None], solutions.T], axis=1), axis=1)), axis=0)
+        if number == 0 and len(steps):
+            steps[0] = 0.0
+        jumps = np.flatnonzero(steps > config.max_joint_step)
+        reached = int(jumps[0]) if len(jumps) else len(solutions)
+        if reached:
+            q = solutions[reached - 1]
+        if done + reached < len(samples):
+            return q, (samples[done + reached], solved_length + polyline_length(samples[:done + reached]))
+        solved_length += polyline_length(samples)
+    return q, None
 
 
 # ----------------------------------------------------------------------------------------------- plan
 def plan_path(q_start: Sequence[float], strokes: Sequence[np.ndarray], tool: str, speed: float = 0.0,
-              config: PathConfig = PathConfig()) -> PathPlan:
-    """Every motion of the request, timed, from joint positions `q_start`; PathError if it cannot be followed."""
+              config: PathConfig = PathConfig(), check_interrupted: Callable[[], None] = lambda: None) -> PathPlan:
+    """Every motion of the request, timed, from joint positions `q_start`; PathError if it cannot be followed.
+
+    Planning takes a time linear in the path's samples (see the module's docstring); `check_interrupted` is called
+    between passes of twenty thousand samples and may raise to abandon the plan (a cancel or a stop)."""
     if tool not in TOOLS:
         raise PathError(PathErrorCode.INVALID_PATH, f'unknown tool {tool!r}; tools: {", ".join(TOOLS)}')
     if not math.isfinite(speed) or speed < 0 or speed > config.max_speed:
@@ -279,25 +333,23 @@ def plan_path(q_start: Sequence[float], strokes: Sequence[np.ndarray], tool: str
     z_follow = surface.z - (tools.press_depth(tool) if contact else -config.travel_height)
     z_travel = surface.z + config.travel_height
     yaw = choose_yaw(tool, np.vstack(strokes), z_follow)
-    dense = [resample(stroke, config.step) for stroke in strokes]
     lengths = [polyline_length(stroke) for stroke in strokes]
     total_length = float(sum(lengths))
 
-    # Reachability first, over the whole path, so that a path the arm cannot follow fails before anything moves.
+    # Reachability first, over the whole path resampled every `step`, so that a path the arm cannot follow fails
+    # before anything moves.
     q = READY_JOINTS
     solved_length = 0.0
-    for index, samples in enumerate(dense):
-        solutions, reached = _solve(tool, samples, z_follow, yaw, q, config.max_joint_step)
-        if reached < len(samples):
-            solved_length += polyline_length(samples[:reached])
-            fraction = solved_length / total_length if total_length > 0 else 0.0
-            x, y = samples[reached]
+    for index, stroke in enumerate(strokes):
+        q, failure = _reach(tool, stroke, z_follow, yaw, q, config, check_interrupted)
+        if failure is not None:
+            (x, y), stroke_length = failure
+            fraction = (solved_length + stroke_length) / total_length if total_length > 0 else 0.0
             raise PathError(PathErrorCode.IK_FAILED,
                             f'the arm cannot follow the path with the {tool if contact else "tool"} at '
                             f'({x:.3f}, {y:.3f}): no joint solution without a jump (fraction {fraction:.2f})',
                             fraction)
         solved_length += lengths[index]
-        q = solutions[-1]
 
     limits = config.joint_limits
     follow_limits = CartesianLimits(speed=speed, acceleration=config.acceleration, jerk=config.jerk)
@@ -313,8 +365,9 @@ def plan_path(q_start: Sequence[float], strokes: Sequence[np.ndarray], tool: str
         q = trajectory.end
 
     try:
-        for index, (stroke, samples) in enumerate(zip(strokes, dense)):
-            first = samples[0]
+        for index, stroke in enumerate(strokes):
+            check_interrupted()
+            first = stroke[0]
             if index == 0:  # from wherever the arm is: a joint-space move onto the ready branch
                 above = inverse_kinematics(flange_pose(tool, (*first, z_travel), yaw), q_seed=READY_JOINTS,
                                            tool_offset=0.0)
@@ -322,11 +375,11 @@ def plan_path(q_start: Sequence[float], strokes: Sequence[np.ndarray], tool: str
             else:  # between strokes: straight at travel height, clear of the objects on the surface
                 add(StepKind.TRAVEL, _line(q, tool, (*first, z_travel), yaw, limits, travel_limits, config), index)
             add(StepKind.DESCEND, _line(q, tool, (*first, z_follow), yaw, limits, vertical_limits, config), index)
-            add(StepKind.FOLLOW, _follow(q, tool, samples, z_follow, yaw, limits, follow_limits, config), index,
-                len(stroke), lengths[index])
+            add(StepKind.FOLLOW, _follow(q, tool, stroke, z_follow, yaw, limits, follow_limits, config,
+                                         check_interrupted), index, len(stroke), lengths[index])
             points_before += len(stroke)
             length_before += lengths[index]
-            add(StepKind.LIFT, _line(q, tool, (*samples[-1], z_travel), yaw, limits, vertical_limits, config),
+            add(StepKind.LIFT, _line(q, tool, (*stroke[-1], z_travel), yaw, limits, vertical_limits, config),
                 index)
         if config.park_joints:
             add(StepKind.PARK, time_joint_path([q, np.asarray(config.park_joints, dtype=float)], limits),
@@ -343,27 +396,53 @@ def _line(q: np.ndarray, tool: str, xyz: Sequence[float], yaw: float, limits: Jo
                           max_joint_step=config.max_joint_step)
 
 
-def _follow(q: np.ndarray, tool: str, samples: np.ndarray, z: float, yaw: float, limits: JointLimits,
-            cartesian_limits: CartesianLimits, config: PathConfig) -> JointTrajectory:
-    """Along a stroke's samples at height z: each smooth piece timed along its length, from rest to rest."""
-    parts = []
-    to_flange = np.linalg.inv(_flange_to_tool(tool))
-    for piece in split_at_corners(samples, config.corner_angle):
-        if len(piece) < 2:
-            continue
-        steps = np.linalg.norm(np.diff(piece, axis=0), axis=1)
-        length = float(np.sum(steps))
-        along = np.concatenate([[0.0], np.cumsum(steps)]) / length
+def _follow(q: np.ndarray, tool: str, stroke: np.ndarray, z: float, yaw: float, limits: JointLimits,
+            cartesian_limits: CartesianLimits, config: PathConfig,
+            check_interrupted: Callable[[], None]) -> JointTrajectory:
+    """Along a stroke at height z: each smooth piece timed along its length, from rest to rest. (The corners of
+    the stroke resampled are the stroke's own: resampling adds points only along its straight segments.)"""
+    points, cuts = corners(stroke, config.corner_angle)  # the pieces: points cuts[k] to cuts[k + 1]
+    if len(points) < 2:
+        return time_joint_path([q], limits)
+    # Piece k runs from k to k + 1 of one parameter along the stroke, through its points at their fractions of its
+    # length: one interpolation gives the points of any pieces at any of their path parameters.
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    lengths = along[cuts[1:]] - along[cuts[:-1]]
+    piece = np.searchsorted(cuts, np.arange(len(points)), side='right') - 1  # the piece each point begins
+    piece[-1] = len(lengths) - 1
+    knots = piece + (along - along[cuts[piece]]) / lengths[piece]
+    knots[cuts[1:]] = np.arange(1, len(cuts))  # a piece's last point is k + 1, not the next piece's start
+    flange = flange_pose(tool, (0.0, 0.0, z), yaw)  # at (x, y): moved by (x, y)
 
-        def poses_at(s: np.ndarray, piece: np.ndarray = piece, along: np.ndarray = along) -> np.ndarray:
-            x, y = np.interp(s, along, piece[:, 0]), np.interp(s, along, piece[:, 1])
-            return np.array([top_down_pose((xi, yi, z), yaw) @ to_flange for xi, yi in zip(x, y)])
+    def poses_at(piece: np.ndarray, s: np.ndarray) -> np.ndarray:
+        along = piece + s
+        poses = np.repeat(flange[None], len(s), axis=0)
+        poses[:, 0, 3] += np.interp(along, knots, points[:, 0])
+        poses[:, 1, 3] += np.interp(along, knots, points[:, 1])
+        return poses
 
-        part = timed_cartesian_path(q, poses_at, length, 0.0, limits, cartesian_limits, tool_offset=0.0,
-                                    max_joint_step=config.max_joint_step)
-        parts.append(part)
-        q = part.end
-    return concatenate(parts) if parts else time_joint_path([q], limits)
+    return timed_cartesian_paths(q, poses_at, lengths, None, limits, cartesian_limits, tool_offset=0.0,
+                                 max_joint_step=config.max_joint_step, check_interrupted=check_interrupted)
+
+
+def rest_parts(trajectory: JointTrajectory, max_samples: int) -> list[JointTrajectory]:
+    """The trajectory cut where it is at rest (every joint's velocity and acceleration zero: a stroke's corners)
+    into consecutive trajectories of at most `max_samples` samples each, each from time 0; more where it does not
+    come to rest that often. One part when it has no more samples than that."""
+    if len(trajectory) <= max_samples:
+        return [trajectory]
+    last = len(trajectory) - 1
+    rests = np.append(np.flatnonzero(~np.any(trajectory.velocities[:-1], axis=1)
+                                     & ~np.any(trajectory.accelerations[:-1], axis=1)), last)
+    cuts = [0]
+    while cuts[-1] < last:
+        # The last rest within max_samples of the part's start, else the first after it (a long smooth piece
+        # goes whole).
+        within = int(rests[np.searchsorted(rests, cuts[-1] + max_samples - 1, side='right') - 1])
+        cuts.append(within if within > cuts[-1] else int(rests[np.searchsorted(rests, cuts[-1], side='right')]))
+    return [JointTrajectory(trajectory.times[a:b + 1] - trajectory.times[a], trajectory.positions[a:b + 1],
+                            trajectory.velocities[a:b + 1], trajectory.accelerations[a:b + 1], trajectory.joint_names)
+            for a, b in zip(cuts[:-1], cuts[1:])]
 
 
 def tool_tip_positions(trajectory: JointTrajectory, tool: str) -> np.ndarray:

@@ -222,6 +222,8 @@ def wait_for_future(future, timeout_s: float, what: str, stop_requested: threadi
         if time.monotonic() > deadline:
             if cancel is not None:
                 cancel()
+            if cancelled:  # the wait after the cancel is the one that ran out
+                raise RobotApiError(f'{what} did not answer within {cancel_timeout_s:g} s of the cancel')
             raise RobotApiError(f'{what} did not answer within {timeout_s:.0f} s')
     if future.exception() is not None:
         raise RobotApiError(f'{what} failed: {future.exception()}')
