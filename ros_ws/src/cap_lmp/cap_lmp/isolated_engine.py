@@ -79,6 +79,10 @@ _STAGES = (GENERATING, CODE, EXECUTING, DONE, ERROR)
 # How long after time_limit_s the process is killed when no result came: room for the watchdog's own stop and the
 # result message (milliseconds), small enough that the time limit holds within a second whatever the program does.
 KILL_MARGIN_S = 0.5
+# How long a cancelled program may take to stop by itself before its process is killed: a Python loop stops within
+# milliseconds; what is still running after this is one C call that nothing else can end. Short enough that every
+# stop ends the program within a second (benchmarks/stop_latency.py), at the price of the session when it kills.
+CANCEL_GRACE_S = 0.7
 _MODEL_GRACE_S = 1.0  # a model client that overruns its time budget by this much is no longer waited for
 # Environment the sandbox process keeps: what Python needs; nothing of ROS, and no model credentials (the model is
 # asked from here).
@@ -278,7 +282,7 @@ class IsolatedEngine:
     def __init__(self, build_engine: Callable[..., Any], api: Mapping[str, Callable[..., Any]], client: LLMClient,
                  limits: SandboxLimits | None = None, *, engine_options: Mapping[str, Any] | None = None,
                  stall_limit_s: float = 10.0,
-                 cancel_grace_s: float = 2.0, start_timeout_s: float = 60.0, send_timeout_s: float = 5.0,
+                 cancel_grace_s: float = CANCEL_GRACE_S, start_timeout_s: float = 60.0, send_timeout_s: float = 5.0,
                  model_time_limit_s: float = 120.0, address_space_extra_bytes: int | None = None,
                  jail: str = 'required', child_command: Sequence[str] | None = None,
                  function_arguments: Sequence[str] = (), on_deadline: Callable[[], None] | None = None) -> None:
