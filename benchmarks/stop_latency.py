@@ -172,7 +172,10 @@ class Bench:
 def next_path_goal_accepted(bench: Bench) -> dict:
     """Right after a stop: send follow_path a path (off the board: refused by its checks, nothing moves) and say
     whether the goal was accepted, and how soon its answer came."""
-    client = ActionClient(bench.node, FollowPath, GraphNames.FOLLOW_PATH_ACTION)
+    # One client per bench, never destroyed while the graph's executor spins its node (rclpy then fails a
+    # callback in flight on the destroyed handle, and the graph's executor thread with it).
+    client = getattr(bench, 'path_client', None) or ActionClient(bench.node, FollowPath, GraphNames.FOLLOW_PATH_ACTION)
+    bench.path_client = client
     wait(client.server_is_ready, 30, 'follow_path')
     sent = time.monotonic()
     goal = FollowPath.Goal(tool=FollowPath.Goal.TOOL_NONE,
@@ -185,7 +188,6 @@ def next_path_goal_accepted(bench: Bench) -> dict:
         result = handle.result().get_result_async()
         wait(result.done, 30, 'follow_path\'s result')
         answered = round(time.monotonic() - sent, 3)
-    client.destroy()
     return {'next_goal_accepted': accepted, 'next_goal_answered_s': answered}
 
 
@@ -198,19 +200,17 @@ def seconds_after_start(seconds: float) -> Callable[[float], bool]:
 
 
 def after_message(bench: Bench, message_type, topic: str, matches: Callable, delay: float) -> Callable[[float], bool]:
-    """True `delay` seconds after the first message on `topic` that `matches`."""
+    """True `delay` seconds after the first message on `topic` that `matches`. The subscription stays until the
+    bench closes: destroying it while the graph's executor spins the node could fail a callback in flight."""
     seen: dict[str, float] = {}
 
     def on_message(msg) -> None:
         if matches(msg):
             seen.setdefault('at', time.monotonic())
-    subscription = bench.node.create_subscription(message_type, topic, on_message, 10)
+    bench.node.create_subscription(message_type, topic, on_message, 10)
 
     def under_way(_: float) -> bool:
-        if 'at' in seen and time.monotonic() > seen['at'] + delay:
-            bench.node.destroy_subscription(subscription)
-            return True
-        return False
+        return 'at' in seen and time.monotonic() > seen['at'] + delay
     return under_way
 
 
