@@ -241,6 +241,15 @@ class ApprovalGuard:
             self.phase = PLANNING if required else OFF
             self._plan, self._next, self.violation = [], 0, ''
 
+    def may_ask(self) -> None:
+        """Before a person is asked: NotApproved if the program already broke the rules or was approved once (a
+        command is approved once; a second request would show a plan the guard does not hold the run to)."""
+        with self._lock:
+            if self.phase == APPROVED and not self.violation:
+                self.violation = 'the program asked for approval a second time; it was refused and the program stopped'
+            if self.violation:
+                raise NotApproved(f'{self.violation}; nothing more ran', 'rejected')
+
     def approve(self, plan: Sequence[PlannedCall]) -> None:
         """A person approved `plan`: from now on the program may make exactly these acting calls, in this order.
         NotApproved if the program already broke the rules (it is not run on)."""

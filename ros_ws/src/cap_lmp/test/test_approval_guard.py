@@ -72,6 +72,18 @@ def test_after_approval_exactly_the_planned_calls_in_their_order(rig):
     assert [call[0] for call in robot.calls] == ['put_first_on_second'] and len(set(refusals)) == 1
 
 
+def test_a_command_is_approved_once(rig):
+    guard, robot, api, _ = rig
+    guard.begin(True)
+    guard.may_ask()
+    guard.approve([PlannedCall('say', ('hi',))])
+    with pytest.raises(NotApproved, match='asked for approval a second time'):
+        guard.may_ask()  # a second plan would be shown but not held: nobody is asked
+    with pytest.raises(UnapprovedAction):
+        api['say']('hi')
+    assert robot.calls == []
+
+
 def test_a_call_beyond_the_plan_or_elsewhere_is_refused(rig):
     guard, robot, api, _ = rig
     guard.begin(True)

@@ -453,8 +453,7 @@ class LmpNode(Node):
         job = self._current
         if job is None:
             raise NotApproved('no command is running', 'rejected')
-        if self.approval_guard.violation:  # it acted before asking: nobody is asked
-            raise NotApproved(f'{self.approval_guard.violation}; nothing more ran', 'rejected')
+        self.approval_guard.may_ask()  # not after acting before asking, nor a second time: nobody is asked then
         steps = [self._plan_step(call) for call in calls]
         timeout_s = self.approval_timeout_s
         service = self.resolve_topic_name(GraphNames.APPROVE_SERVICE)
