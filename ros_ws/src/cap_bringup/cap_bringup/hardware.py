@@ -14,6 +14,8 @@ from cap_control.pick_place.plan import PickPlaceConfig
 from cap_hardware.profile import HardwareProfile
 
 
+HARDWARE_VIEW_TIMEOUT_S = 10.0  # pick_place's view_timeout on a real robot [s]
+
 def _arm(profile: HardwareProfile) -> dict[str, Any]:
     arm, gripper = profile.arm, profile.gripper
     return {'joint_states_topic': arm.joint_states, 'arm_controller_action': arm.controller_action,
@@ -35,6 +37,9 @@ def _pick_place(profile: HardwareProfile) -> dict[str, Any]:
     mount = profile.calibration.camera_mount
     if mount.parent == profile.world_frame:  # a camera over the table: keep out of its line of sight
         values.update(clear_view=True, camera_position=list(mount.translation))
+    # A real camera's frames reach the detector later than a simulator's, and the detector shares its CPU with the
+    # whole graph: a place is judged on a view taken after it, waited for this long before the last one is used.
+    values['view_timeout'] = HARDWARE_VIEW_TIMEOUT_S
     return values
 
 

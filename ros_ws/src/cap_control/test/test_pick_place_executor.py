@@ -95,6 +95,7 @@ class FakeWorld(Arm, Gripper, Perception):
         self.moving = threading.Event()
         self.drop_to: tuple[float, float, float] | None = None
         self.missing_object = False  # nothing between the fingers when they close
+        self.misses_left = 0  # grasps that close on nothing before one finds the object
         self.perception_answers = True
         self.hidden_from = None  # joint positions from which the camera sees placed objects again; None: always seen
 
@@ -132,6 +133,9 @@ class FakeWorld(Arm, Gripper, Perception):
         if max_effort > 0:  # closing on an object (a grasp is the only command with a grip force)
             under = [o for o in self.objects.values() if o.category == 'block'
                      and math.dist(o.position[:2], tcp[:2]) < 0.01] if not self.missing_object else []
+            if self.misses_left > 0:  # this grasp closes on nothing (the object was not where it was seen)
+                self.misses_left -= 1
+                under = []
             if under:
                 self.held = under[0].name
                 self.opening_now = under[0].size[1]
@@ -231,7 +235,22 @@ def test_a_grasp_that_closes_on_nothing_fails_before_lifting(table):
     assert (outcome.ending, outcome.code) == (Ending.FAILED, PickPlaceErrorCode.GRASP_MISSED)
     assert 'grasp missed' in outcome.message
     assert stages[-1] == StageName.VERIFY
-    assert world.stage_motions() == [StageName.APPROACH, StageName.DESCEND], 'nothing moves after the miss'
+    # A second grasp after the first missed: the fingers open, the arm lifts back (during the failed verify) and,
+    # already above the object, comes down again; after the second miss nothing moves on.
+    assert world.stage_motions() == [StageName.APPROACH, StageName.DESCEND, StageName.VERIFY, StageName.DESCEND], \
+        'nothing moves after the last miss'
+    grasp = BLOCK[1] - PickPlaceConfig().grasp_squeeze
+    assert [position for position, _ in world.gripper_commands] == pytest.approx(
+        [grasp, PickPlaceConfig().gripper_open_width, grasp])
+
+
+def test_a_missed_grasp_is_tried_once_more_and_the_pick_finishes(table):
+    world, executor, stages = table
+    world.misses_left = 1
+    outcome = run(executor, stages, PickPlaceRequest('red block', 'blue bowl'))
+    assert (outcome.ending, outcome.code) == (Ending.SUCCEEDED, PickPlaceErrorCode.NONE), outcome.message
+    assert math.dist(outcome.final_position[:2], (-0.1, -0.6)) < 0.01
+    assert stages.count(StageName.VERIFY) == 2 and stages[-1] == StageName.RETREAT
 
 
 @pytest.mark.parametrize('how', ['stop', 'cancel'])

@@ -131,7 +131,19 @@ class PickPlaceExecutor:
         run = PlanRun(self, interruption)
         try:
             plan = run.plan(request)
-            run.execute(plan, feedback)
+            attempt = 1
+            while True:
+                try:
+                    run.execute(plan, feedback)
+                    break
+                except Failed as failure:
+                    if failure.code != PickPlaceErrorCode.GRASP_MISSED or attempt >= self.config.grasp_attempts:
+                        raise
+                    attempt += 1
+                    self.log('warning', f'{failure.message}; opening the fingers, lifting back and looking again '
+                                        f'(grasp {attempt} of {self.config.grasp_attempts})')
+                    run.back_off(plan)
+                    plan = run.plan(request)
             final = run.object_state(plan.object.name)
             self.log('info', f'placed the {plan.object.name} on {plan.target_description}')
             return PickPlaceOutcome(Ending.SUCCEEDED, PickPlaceErrorCode.NONE, '',
@@ -236,6 +248,19 @@ class PlanRun(GoalRun):
             self.check(plan, stage, observation)
             done = stage.progress
         feedback(plan.stages[-1].name, 1.0)
+
+    def back_off(self, plan: PickPlacePlan) -> None:
+        """After a missed grasp: open the fingers, lift straight back up (the plan's lift), out of the camera's view
+        where the plan has a place for that, and wait for perception to see the object from there."""
+        self.grip_result(self.grip(GripperStep(plan.config.gripper_open_width)), Observation())
+        for stage in plan.stages:
+            if stage.name == StageName.LIFT:
+                for step in stage.steps:
+                    if isinstance(step, TrajectoryStep):
+                        self.move(plan, step, StageName.LIFT)
+        if plan.look_again is not None:
+            self.move(plan, plan.look_again, StageName.LIFT)
+        self.wait_for_fresh_view(plan.object.name, warn=False)
 
     def move(self, plan: PickPlacePlan, step: TrajectoryStep, stage: StageName) -> None:
         trajectory = plan.trajectory_for(step, self.current_joints())

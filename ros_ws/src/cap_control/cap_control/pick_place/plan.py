@@ -195,6 +195,11 @@ class PickPlaceConfig:
     grasp_width_tolerance: float = parameter(0.012, 'A grasp is verified when the fingers stop within this of the '
                                              'object\'s width [m].')
     require_stalled: bool = parameter(True, 'A grasp counts only if the fingers stalled on the object.')
+    # A missed grasp is most often a stale or partial view of the object (a camera that last saw it from behind the
+    # arm): looking again and grasping once more finishes the pick, as a person would.
+    grasp_attempts: int = parameter(2, 'Grasps tried before a missed grasp fails the pick; after a miss the fingers '
+                                    'open, the arm lifts back (and clears the camera\'s view) and perception looks '
+                                    'again.')
     place_clearance: float = parameter(0.005, 'Release height above the expected contact [m].')
     bowl_floor_thickness: float = parameter(0.01, 'A bowl\'s floor is taken this far above its bottom [m].')
     finger_thickness: float = parameter(0.014, 'Thickness of a finger outside its pad [m]; grasp and place yaws keep '
