@@ -93,6 +93,16 @@ def test_a_restarted_lmp_node_ends_what_was_open_and_its_reused_ids_are_new_comm
         ('cmd-1', 'wave', 'done'), ('cmd-2', 'stack the blocks', 'lost'), ('cmd-1', 'say hi', '')]
 
 
+def test_what_the_robot_says_stays_with_the_running_command_even_before_its_later_statuses_arrive():
+    state = ConsoleState()
+    state.on_status(StatusRecord('cmd-1', 'say hello', 'received'))
+    state.on_status(StatusRecord('cmd-2', 'wave', 'received'))  # queued behind cmd-1
+    state.on_say('hello')  # cmd-1's program spoke before its 'executing' status reached the console
+    commands = state.snapshot()['commands']
+    assert [(c['id'], c['said']) for c in commands] == [('cmd-1', ['hello']), ('cmd-2', [])]
+    assert state.snapshot()['notices'] == []
+
+
 class MemoryBackend:
     """The ConsoleBackend of these tests: one image topic, requests recorded."""
 

@@ -58,6 +58,9 @@ class _Channel:
         self._handle_ids = itertools.count(1)
         self.on_invoke: Callable[[dict[str, Any]], dict[str, Any]] | None = None
         self.invoking = False  # a function passed to a robot call runs for the parent
+        # Ends the run (message, reason) when the parent says a call met the program's end: its clock, which
+        # counts the robot's time, passed the time limit before this side's watchdog did.
+        self.on_stop: Callable[[str, str], None] | None = None
 
     def send(self, message: dict[str, Any]) -> None:
         data = wire.encode(message)
@@ -104,7 +107,10 @@ class _Channel:
         self.call_seconds.append(time.perf_counter() - started)
         error = reply.get('error')
         if error:
-            raise API_ERRORS.get(str(error.get('type')), RobotApiError)(str(error.get('message', '')))
+            message = str(error.get('message', ''))
+            if error.get('stop') == 'timeout' and self.on_stop is not None:
+                self.on_stop(message, 'timeout')  # raises the run's stop, which the program cannot catch
+            raise API_ERRORS.get(str(error.get('type')), RobotApiError)(message)
         return reply.get('value')
 
 
@@ -207,6 +213,15 @@ def _approval_gate(channel: _Channel) -> Callable[[str, list], None]:
     return ask
 
 
+def _run_stopper(engine: Any) -> Callable[[str, str], None]:
+    """Stop the run on this (the program's) thread with a reason, as its own watchdog would have."""
+    def stop(message: str, reason: str) -> None:
+        watchdog = engine.sandbox.watchdog
+        if watchdog is not None:
+            watchdog.stop(message, reason)
+    return stop
+
+
 def _proxy(channel: _Channel, name: str, functions: bool = False) -> Callable[..., Any]:
     def call_robot(*args: Any, **kwargs: Any) -> Any:
         return channel.call(name, args, kwargs, functions)
@@ -254,6 +269,7 @@ def serve(connection: Connection, control: Connection) -> None:
     engine = _build_engine(setup, channel)
     freeze_setup_heap()
     channel.on_invoke = _invoker(channel, engine)
+    channel.on_stop = _run_stopper(engine)
     _limit_address_space(int(setup.get('address_space_extra_bytes', 0)))
     # The jail comes last of the setup (the engine's modules are loaded, the memory cap is set) and before the
     # threads start: Landlock and the capability drop bind the calling thread and the threads it starts later.

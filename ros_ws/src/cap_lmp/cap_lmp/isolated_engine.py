@@ -761,7 +761,7 @@ class IsolatedEngine:
         left_s = self.limits.time_limit_s - clock.program_s(time.monotonic())
         if left_s <= 0:
             reply['error'] = {'type': 'StoppedError', 'message': f'the time limit of {self.limits.time_limit_s:g} s '
-                              'passed; the robot was not called'}
+                              'passed; the robot was not called', 'stop': 'timeout'}
             return wire.encode(reply)
         args = [_imported(value) for value in args]
         kwargs = {key: _imported(value) for key, value in kwargs.items()}
@@ -786,10 +786,11 @@ class IsolatedEngine:
             kind = next((cls.__name__ for cls in type(error).__mro__ if cls.__name__ in wire.API_ERRORS),
                         'RobotApiError')
             text = str(error)[:2000]
-            if fired.is_set():
-                kind, text = 'StoppedError', (f'the time limit of {self.limits.time_limit_s:g} s passed during '
-                                              f'{name}(), so the robot was stopped ({text})')
             reply['error'] = {'type': kind, 'message': text}
+            if fired.is_set():
+                reply['error'] = {'type': 'StoppedError', 'stop': 'timeout',
+                                  'message': f'the time limit of {self.limits.time_limit_s:g} s passed during '
+                                             f'{name}(), so the robot was stopped ({text})'}
             return wire.encode(reply)
 
     def _deadline_passed(self, fired: threading.Event) -> None:

@@ -122,8 +122,9 @@ class ConsoleState:
             self._touch()
 
     def _running(self) -> CommandEntry | None:
-        running = [entry for entry in self._commands if not entry.outcome and entry.stage != 'received']
-        return running[-1] if running else None
+        # lmp_node runs commands one at a time in the order they came: the oldest one without an outcome is the one
+        # running, even while its status still says 'received' (a say can arrive before its later statuses do)
+        return next((entry for entry in self._commands if not entry.outcome), None)
 
     def set_streams(self, topics: list[str]) -> None:
         with self._lock:
