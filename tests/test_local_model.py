@@ -6,6 +6,8 @@ CAP_REQUIRE_LOCAL_MODEL=1 (CI, after `make model`) makes that a failure.
 """
 import os
 import signal
+import subprocess
+import sys
 import time
 
 import pytest
@@ -14,6 +16,7 @@ from cap_bench.devset.bench import _episode_judge
 from cap_bench.devset.commands import BY_KEY
 from cap_bench.tabletop.options import TabletopOptions
 from cap_bench.tabletop.runner import TabletopRunner
+from cap_lmp.local_model import default_model_path
 from cap_lmp.local_server import local_model_installed
 from conftest import next_domain_id
 
@@ -23,6 +26,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.graph, pytest.mark.timeout(1800), py
     not local_model_installed() and os.environ.get('CAP_REQUIRE_LOCAL_MODEL') != '1',
     reason='the local model is not installed (make model)')]
 
+READY_LINE = '[lmp_node]: model ready'  # what `cap up` logs once the model has its prompts
 # Everyday commands of the development set, each judged on the simulator's final state.
 COMMANDS = ('bowl_by_name', 'block_on_block', 'to_corner')
 
@@ -83,7 +87,59 @@ def test_the_servers_death_mid_command_is_a_clear_error_and_the_server_comes_bac
         time.sleep(0.5)
     assert server.pid != first_pid and node.model_ready_generation == first_start + 1
     assert any('died (exit code -9); restarting' in message for message in model_events), model_events
+    # the restarted server took the prompts from the files the first start saved, instead of reading them again
     assert any(message.startswith('model ready') and f'server start {first_start + 1};' in message
-               for message in model_events), model_events
+               and 'restored from' in message for message in model_events), model_events
     record = run(local_graph, 'to_middle')
     assert record['success'], f"{record['reason']}\n{record['code']}"
+
+
+def test_a_command_sent_before_the_model_is_ready_waits_for_it_and_the_next_start_is_quick(ros_isolation, tmp_path):
+    """As a user tried it: `cap up` on a cold start, and 20 s later a command. The model reads its prompts for minutes
+    on one core; the command waits for that outside its 120 s model deadline and ends done. The prompts read are kept
+    (here in a cache folder of the test's own), so the next start restores them instead of reading them."""
+    env = {**os.environ, 'CAP_CACHE': str(tmp_path / 'cache'), 'CAP_MODEL_FILE': str(default_model_path())}
+    up = [sys.executable, '-m', 'cap_bringup.cli', 'up', '--backend', 'local', '--seed', '1',
+          '--objects', 'green block, cyan bowl, red block']
+    first_log = tmp_path / 'first.log'
+    first = _start(up, env, first_log)
+    try:
+        time.sleep(20.0)  # the user's pause, not a measurement
+        sent = subprocess.run([sys.executable, '-m', 'cap_bringup.cli', 'send', 'put the green block in the cyan bowl',
+                               '--wait', '120', '--timeout', '1200'], capture_output=True, text=True, env=env,
+                              timeout=1300)
+        assert sent.returncode == 0 and 'success: done' in sent.stdout, sent.stdout + sent.stderr
+    finally:
+        _stop(first)
+    output = first_log.read_text(errors='replace')
+    ready = [line for line in output.splitlines() if READY_LINE in line]
+    assert ready and 'restored from' not in ready[0], output[-3000:]  # every prompt was read
+    assert len(list((tmp_path / 'cache' / 'prompt-kv').glob('*.kv'))) >= 2
+
+    second_log = tmp_path / 'second.log'
+    second = _start(up, env, second_log)
+    try:
+        deadline = time.monotonic() + 600
+        while READY_LINE not in second_log.read_text(errors='replace') and time.monotonic() < deadline \
+                and second.poll() is None:
+            time.sleep(0.5)
+    finally:
+        _stop(second)
+    ready = [line for line in second_log.read_text(errors='replace').splitlines() if READY_LINE in line]
+    assert ready and 'restored from' in ready[0] and ', 0 tokens read' in ready[0], second_log.read_text()[-3000:]
+
+
+def _start(command: list[str], env: dict[str, str], log) -> subprocess.Popen:
+    with open(log, 'w') as out:  # a file, not a pipe nobody reads while the graph runs
+        return subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+
+
+def _stop(process: subprocess.Popen) -> None:
+    """Ctrl-C to the graph, as a user stops it."""
+    if process.poll() is None:
+        os.killpg(process.pid, signal.SIGINT)
+    try:
+        process.wait(60)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait()

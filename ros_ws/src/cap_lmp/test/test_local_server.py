@@ -14,7 +14,7 @@ from cap_lmp.errors import LLMError
 from cap_lmp.llm import CompletionRequest
 from cap_lmp.local_model import ModelFile
 from cap_lmp.local_server import (LocalModelClient, LocalModelError, LocalModelServer, ServerSettings,
-                                  local_model_installed)
+                                  local_model_installed, warm_up)
 from cap_lmp.model_install import file_sha256, join_parts
 
 needs_model = pytest.mark.skipif(not local_model_installed() and os.environ.get('CAP_REQUIRE_LOCAL_MODEL') != '1',
@@ -84,3 +84,40 @@ def test_the_server_answers_is_restarted_after_its_death_and_stops_with_its_owne
 
 def test_errors_of_the_local_model_are_model_errors():
     assert issubclass(LocalModelError, LLMError)  # the engine reports them as "the model gave no usable answer"
+
+
+def _uncached_prompt_tokens(server: LocalModelServer, prompt: str) -> tuple[int, str]:
+    """How many tokens of `prompt` the server had to evaluate (llama.cpp's `timings.prompt_n`), and its greedy answer."""
+    import requests
+    reply = requests.post(f'{server.base_url}/completions', timeout=120, json={
+        'model': server.model_name, 'prompt': prompt, 'max_tokens': 8, 'temperature': 0.0}).json()
+    return int(reply['timings']['prompt_n']), reply['choices'][0]['text']
+
+
+@pytest.mark.slow
+@needs_model
+def test_prompts_read_once_are_restored_by_the_next_start_and_answer_the_same(tmp_path):
+    # two prompts of a few hundred tokens sharing their first line, as a domain's LMPs do
+    lines = [f'# {name}: the position of the {name} block, in metres' for name in ('red', 'green', 'blue', 'pink')]
+    first = 'import numpy as np\n' + '\n'.join(lines * 6) + '\n'
+    second = 'import numpy as np\n' + '\n'.join(reversed(lines * 6)) + '\n'
+    prompts = [('ui', first), ('parse_obj_name', second)]
+    settings = ServerSettings(threads=1, context_size=2048, prompt_cache_dir=str(tmp_path))
+
+    with LocalModelServer(settings) as cold:
+        said = warm_up(LocalModelClient(cold), prompts)
+        assert said.startswith('2 prompts,') and 'restored' not in said, said
+        answer_cold = _uncached_prompt_tokens(cold, first + '# yellow:')[1]
+    assert len(list(tmp_path.glob('*.kv'))) == 2 and not list(tmp_path.glob('*.tmp'))
+
+    with LocalModelServer(settings) as warm:
+        said = warm_up(LocalModelClient(warm), prompts)
+        assert '2 restored' in said and ', 0 tokens read' in said, said
+        # both prompts are in the server's cache: only the new words are read, and the answer is the one the
+        # freshly read prompt gave
+        evaluated, answer_warm = _uncached_prompt_tokens(warm, first + '# yellow:')
+        assert evaluated <= 6 and answer_warm == answer_cold
+        assert _uncached_prompt_tokens(warm, second + '# yellow:')[0] <= 6
+        # a prompt that changed is read afresh, never served from another prompt's file
+        said = warm_up(LocalModelClient(warm), [('ui', first + '# one more line\n')])
+        assert said.startswith('1 prompt,') and 'restored' not in said, said

@@ -48,6 +48,9 @@ class LmpNodeConfig:
     model_threads: int = parameter(1, 'With llm_backend=local: CPU threads of the model server (1 keeps a core for '
                                    'the simulator on a 2-core machine).')
     model_context: int = parameter(8192, 'With llm_backend=local: context size of the model server [tokens].')
+    prompt_cache_dir: str = parameter('', 'With llm_backend=local: folder where the prompts read into the model '
+                                      "server's cache are kept for the next start (empty: CAP_CACHE's prompt-kv/, "
+                                      "by default ~/.cache/cap-ros/prompt-kv; 'off': read them at every start).")
     model_port: int = parameter(0, 'With llm_backend=local: loopback port of the model server; 0: a free one.')
     require_approval: bool = parameter(False, 'Hold each generated program until a person approves it: its code and '
                                        'the robot actions a plan-only run of it found are shown on /cap/status '

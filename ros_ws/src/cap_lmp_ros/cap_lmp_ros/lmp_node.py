@@ -136,7 +136,8 @@ class LmpNode(Node):
         self.model_server: LocalModelServer | None = None
         if config.llm_backend == 'local':
             settings = ServerSettings(model_file=config.model_file, threads=config.model_threads,
-                                      context_size=config.model_context, port=config.model_port)
+                                      context_size=config.model_context, port=config.model_port,
+                                      prompt_cache_dir=config.prompt_cache_dir)
             if not settings.model_path().is_file():  # one line at once, not a failure at the first command
                 raise ValueError(f'no model file at {settings.model_path()}: {INSTALL_HINT}')
             try:
@@ -386,6 +387,11 @@ class LmpNode(Node):
             self.engine.approval = self._await_approval if self.require_approval else None
             self.approval_guard.begin(self.require_approval)
             try:
+                if not self._wait_for_model(job):
+                    job.outcome = Outcome.CANCELLED
+                    self._publish_status(job, StatusEvent.STAGE_CANCELLED, message=(
+                        job.stop_reason or 'cancelled') + ' while it waited for the local model')
+                    continue
                 job.result = self.engine.run(job.command)
                 job.outcome = self._outcome(job)
             except Exception as error:  # the engine reports program errors itself; this is a last resort
@@ -506,6 +512,19 @@ class LmpNode(Node):
         self.engine.cancel()
 
     # -------------------------------------------------------------------------------------------- stop, reset
+    def _wait_for_model(self, job: Job) -> bool:
+        """A command that comes while the local model loads and reads its prompts waits here, before its model
+        deadline starts: the warm-up is the graph's cost, not the command's. False when it was stopped meanwhile."""
+        if self.model_server is None or self.model_ready.is_set():
+            return True
+        self._publish_status(job, StatusEvent.STAGE_RECEIVED, message=(
+            'waiting for the local model to load and read its prompts (/cap/status says "model ready" when it has); '
+            "the command's model deadline starts then"))
+        while not self.model_ready.wait(0.1):
+            if job.cancel_requested or self._closing:
+                return False
+        return not job.cancel_requested
+
     def _stop_running(self) -> None:
         self.engine.cancel()
         self.robot.stop()
