@@ -127,3 +127,41 @@ def test_a_command_runs_end_to_end_against_an_openai_protocol_endpoint(ros_conte
             assert any('put the red block on the blue bowl' in r.prompt for r in server.requests)
         finally:
             graph.close()
+
+
+@pytest.mark.slow
+def test_a_program_that_fails_after_a_move_is_finished_by_the_next_one_from_the_scene_as_it_is(ros_context):
+    """Execution feedback (lmp_node's feedback_rounds) on the simulator: the first program puts the red block in its
+    bowl and then sends the blue block off the table; the program the model writes after reading that moves only the
+    blue block, and the command ends done with both blocks in their bowls."""
+    from cap_lmp.testing.openai_server import last_query_line
+
+    command = 'put each block in the bowl of its colour'
+    first = ("put_first_on_second('red block', 'red bowl')\n"
+             "put_first_on_second('blue block', [0.0, 1.5])")
+
+    def respond(request):
+        query = last_query_line(request.prompt)
+        if 'finishing what the program above did not do' in query:
+            return "put_first_on_second('blue block', 'blue bowl')"
+        return first if command in query else None
+
+    with ScriptedOpenAIServer(responder=respond) as server:
+        graph = _Graph(ros_context, GraphOptions(
+            seed=3, objects='red block, blue block, red bowl, blue bowl', llm_backend='http',
+            extra={'lmp_node': {'base_url': server.base_url, 'model': server.model, 'feedback_rounds': 1}}))
+        try:
+            result = graph.send(command)
+            assert _wait(result.done, 300)
+            answer = result.result().result
+            assert answer.success, answer.message
+            world = graph.graph.world
+            for colour in ('red', 'blue'):
+                block = world.object_state(f'{colour} block').position
+                bowl = world.object_state(f'{colour} bowl').position
+                assert np.linalg.norm(np.subtract(block[:2], bowl[:2])) <= 0.06, colour
+            feedback = server.requests[-1].prompt
+            assert "# done before it stopped: put_first_on_second('red block', 'red bowl')" in feedback
+            assert 'line 2' in feedback and len(server.requests) == 2
+        finally:
+            graph.close()

@@ -23,6 +23,7 @@ class BenchOptions:
     backend: str = 'http'  # for policy=llm: 'http' (base_url) or 'local' (a llama.cpp server started for the run)
     model_file: str = ''  # for backend=local; empty: the default model of `make model`
     model_threads: int = 1
+    feedback_rounds: int = 0  # for policy=llm: lmp_node's feedback_rounds (0: the paper's protocol)
 
 
 def policy_name(options: BenchOptions) -> str:
@@ -44,6 +45,8 @@ def lmp_parameters(options: BenchOptions) -> tuple[str, dict[str, Any]]:
     """(llm backend, lmp_node parameters) of the run's policy: the cassette for the oracle, else the model's."""
     lmp: dict[str, Any] = {'time_limit_s': options.episode_timeout_s}
     backend = 'cassette' if options.policy == 'oracle' else options.backend
+    if options.policy == 'llm':
+        lmp['feedback_rounds'] = options.feedback_rounds
     if backend == 'local':  # lmp_node starts and supervises the model server itself
         lmp.update(model_file=options.model_file, model_threads=options.model_threads)
     elif options.policy == 'llm':

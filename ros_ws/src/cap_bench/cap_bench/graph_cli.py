@@ -24,7 +24,7 @@ from cap_bench.ros_domains import domain_ids
 from cap_lmp.errors import LLMError
 from cap_lmp.safe_text import one_line
 
-MODEL_OPTIONS = ('backend', 'base_url', 'model', 'api', 'model_file', 'model_threads')
+MODEL_OPTIONS = ('backend', 'base_url', 'model', 'api', 'model_file', 'model_threads', 'feedback_rounds')
 
 
 class Interrupted(BaseException):
@@ -51,6 +51,10 @@ def add_model_arguments(parser: argparse.ArgumentParser, default_api: str, backe
     parser.add_argument('--model', default='', help=f'{served}; default CAP_LLM_MODEL')
     parser.add_argument('--api', choices=('chat', 'completions'), default=default_api,
                         help=f'{served}: the endpoint protocol [{default_api}]')
+    parser.add_argument('--feedback-rounds', type=int, default=0,
+                        help='for --policy llm: programs that failed while running are followed by one the model '
+                             'writes from what happened, this many times per instruction; 0: the paper\'s '
+                             'protocol [0]')
     if backends:
         parser.add_argument('--model-file', default='', help='with --backend local: a GGUF file [the default model]')
         parser.add_argument('--model-threads', type=int, default=1, help='with --backend local: server threads [1]')

@@ -531,7 +531,7 @@ def standin(profile_path: str, seed: int, objects: str, perturbation_seed: int, 
 def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, cassette: str,
        record: bool, namespace: str = '', domain: str = 'tabletop', cpu: int = 0, model_file: str = '',
        model_threads: int = 1, console_port: int | None = None, require_approval: bool = False,
-       hardware: str = '', preflight_wait: float = 5.0) -> int:
+       hardware: str = '', preflight_wait: float = 5.0, feedback_rounds: int = 0) -> int:
     """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM (and,
     with `console_port`, the web console in a process of its own beside it). With `hardware` (a profile), the
     graph of that real robot instead, once its preflight has passed.
@@ -557,6 +557,8 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
     allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else []  # before the pin
     backend = choose_backend(backend, model_file, cassette)
     lmp: dict[str, Any] = {'require_approval': True} if require_approval else {}
+    if feedback_rounds:
+        lmp['feedback_rounds'] = feedback_rounds
     if backend == 'local':
         lmp.update(model_file=model_file, model_threads=model_threads)
         _say('language model: the local model server (loading; /cap/status says "model ready" when it is)')
@@ -705,6 +707,9 @@ def build_parser() -> argparse.ArgumentParser:
                       'a second graph beside it another')
     p_up.add_argument('--domain', default='tabletop', help='the domain whose prompts, robot API and scene run '
                       '[tabletop]')
+    p_up.add_argument('--feedback-rounds', type=int, default=0, help='a program that failed while running is '
+                      'followed by one the model writes from what happened, up to this many times per command '
+                      '(lmp_node\'s feedback_rounds); 0: one program per command, the paper\'s protocol [0]')
     p_up.add_argument('--require-approval', action='store_true', help='hold each generated program until it is '
                       'approved (cap approve, or the console), after a plan-only run lists its robot actions')
     p_up.add_argument('--console', action='store_true', help='also serve the web console (cap console) on '
@@ -786,7 +791,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return up(args.seed, args.objects, not args.fast, args.perception, args.backend, args.cassette, args.record,
                   args.namespace, args.domain, args.cpu, args.model_file, args.model_threads,
                   args.console_port if args.console else None, args.require_approval, args.hardware,
-                  args.preflight_wait)
+                  args.preflight_wait, args.feedback_rounds)
     if args.command == 'preflight':
         return preflight(args.profile, args.wait)
     if args.command == 'standin':

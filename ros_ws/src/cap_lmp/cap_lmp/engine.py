@@ -35,6 +35,12 @@ approval in time, ends the command as refused; nothing of it ran. The approved r
 approved with: a nested LMP asked with a query the plan did not ask stops it (reason 'unapproved', refused), with
 no new model request.
 
+Execution feedback (feedback.py): with `feedback_rounds`, a program that fails while it runs (a robot call's error,
+a Python error) is followed by a new one the model writes after reading its failed program, the error and its
+line, the robot actions that completed and the scene now; it continues the command from there. The programs of one
+command share its time limit and its model deadline; stops, the sandbox's refusals and approved runs stay final.
+0 (the default) is the paper's protocol: one program per command.
+
 Threads: `run` executes on the calling thread and holds a lock (one command at a time); `cancel()` may be called
 from any thread and stops the running program at its next checkpoint with ExecutionStopped(reason='cancelled').
 """
@@ -54,6 +60,7 @@ from typing import Any, Callable, Iterable, Mapping
 from cap_lmp.approval import ApprovalGate, PlannedCall, recorders, session_copy
 from cap_lmp.errors import (CapLLMError, CodeRejected, ExecutionStopped, GenerationError, NotApproved, UndefinedName,
                             UnusableAnswer)
+from cap_lmp.feedback import action_recorders, continue_query, failure_lines, feedback_block, worth_feedback
 from cap_lmp.functions import top_level_functions, undefined_calls
 from cap_lmp.llm import Completion, CompletionRequest, LLMClient
 from cap_lmp.outcome import Outcome, outcome_of
@@ -223,7 +230,8 @@ class Engine:
                  limits: SandboxLimits | None = None, default_lmp: str | None = None, fgen_lmp: str | None = 'fgen',
                  max_function_depth: int = 4, max_generated_functions: int = 16,
                  model_time_limit_s: float = 120.0, regenerations: int = 0,
-                 regeneration_temperature: float = 0.7, plan_functions: Iterable[str] = ()) -> None:
+                 regeneration_temperature: float = 0.7, plan_functions: Iterable[str] = (),
+                 feedback_rounds: int = 0) -> None:
         self.lmps: dict[str, LMPConfig] = {config.name: config for config in lmps}
         if not self.lmps:
             raise ValueError('an Engine needs at least one LMP')
@@ -237,6 +245,12 @@ class Engine:
         self.model_time_limit_s = model_time_limit_s
         self.regenerations = regenerations
         self.regeneration_temperature = regeneration_temperature
+        # Execution feedback: how often a program that failed while running (a robot call's error, a Python error)
+        # is followed by a new one the model writes knowing what happened (see _finish_after). 0: the paper's
+        # protocol, one program per command.
+        self.feedback_rounds = max(0, int(feedback_rounds))
+        self._done_actions: list[str] = []  # the robot actions of the running command that completed
+        self._feedback_note = ''  # how feedback rounds ended a failed command, for its message
         # The functions that act on the world (move the robot, speak): a plan-only run records their calls.
         self.plan_functions = tuple(name for name in plan_functions if name in self.api)
         self.approval: ApprovalGate | None = None  # set: every command waits for it after a plan-only run
@@ -298,10 +312,14 @@ class Engine:
                 _log.exception('engine event listener failed')
 
     # -- prompting -------------------------------------------------------------------------------------------
-    def build_prompt(self, config: LMPConfig, query: str, context: str = '') -> str:
+    def build_prompt(self, config: LMPConfig, query: str, context: str = '', feedback: str = '') -> str:
+        """The prompt, the session's earlier commands, `feedback` (what an earlier program of this command did:
+        text for the model only, never run), the context line and the query."""
         parts = [config.prompt.rstrip('\n')]
         if config.maintain_session:
             parts.extend(self.histories[config.name])
+        if feedback:
+            parts.append(feedback)
         if context:
             parts.append(context)
         parts.append(f'{config.query_prefix}{query}{config.query_suffix}')
@@ -309,14 +327,15 @@ class Engine:
             return '\n'.join(part for part in parts if part)
         return '\n'.join(parts) + '\n'
 
-    def _ask(self, config: LMPConfig, query: str, context: str, attempt: int = 0) -> str:
+    def _ask(self, config: LMPConfig, query: str, context: str, attempt: int = 0, feedback: str = '') -> str:
         """The model's answer; a later attempt (after an unusable answer) is sampled, with the attempt as seed."""
         self._check_cancel()
         remaining = self.model_time_limit_s - self._stats.model_s
         if remaining <= 0:
             self._model_deadline_passed()
         temperature = config.temperature if attempt == 0 else max(config.temperature, self.regeneration_temperature)
-        request = CompletionRequest(lmp=config.name, prompt=self.build_prompt(config, query, context), query=query,
+        request = CompletionRequest(lmp=config.name, prompt=self.build_prompt(config, query, context, feedback),
+                                    query=query,
                                     context=context, stop=config.stop, max_tokens=config.max_tokens,
                                     temperature=temperature, seed=attempt if attempt else None,
                                     time_budget_s=remaining)
@@ -444,13 +463,14 @@ class Engine:
             self._define_missing(function_tree, known | set(defined), chain + (missing.name,), out)
             out.append((missing.name, self.sandbox.compile_checked(function_tree, source, f'function {missing.name}')))
 
-    def generate(self, lmp: str, query: str, context: str = '', variables: Iterable[str] = ()) -> PreparedCode:
+    def generate(self, lmp: str, query: str, context: str = '', variables: Iterable[str] = (),
+                 feedback: str = '') -> PreparedCode:
         """Ask the LMP's model for code and prepare it (checked, missing functions generated); nothing runs.
 
         An answer that cannot run at all (a syntax error, a name nothing defines, a generated function that does
         not define itself) is asked for again up to `regenerations` times, sampled at `regeneration_temperature`
         (a small model at temperature 0 gives the same answer again); a refusal of the sandbox is final.
-        `variables`: names the caller sets in the program's scope before it runs.
+        `variables`: names the caller sets in the program's scope before it runs; `feedback`: see build_prompt.
         """
         config = self.lmps[lmp]
         variables = tuple(variables)
@@ -458,7 +478,7 @@ class Engine:
         while True:
             self._emit(GENERATING, lmp, message=query)
             generated = len(self._stats.generated)
-            code = self._ask(config, query, context, attempt)
+            code = self._ask(config, query, context, attempt, feedback)
             if config.answer_continues_query:
                 code = f'{config.query_prefix}{query}{config.query_suffix}{code}'
                 check_program_size(code, 'the query with the answer')
@@ -566,13 +586,14 @@ class Engine:
                     self._approved_run = True
                 self._emit(EXECUTING, name, code=result.code)
                 execute_started = time.monotonic()
-                self.scope.update(self._fixed_names)
-                with self.sandbox.watching(self._cancel):  # one time limit for the whole program
-                    self._execute(config, prepared, command, context)
+                self._done_actions, self._feedback_note = [], ''
+                with self.sandbox.watching(self._cancel) as watchdog:  # one time limit for the command's programs
+                    self._execute_with_feedback(config, prepared, command, context, result, watchdog)
                 result.success = True
                 result.outcome = Outcome.DONE
             except Exception as error:  # everything a generated program can cause ends here, reported
                 self._report_failure(result, error)
+                result.message += self._feedback_note
                 if planning and not isinstance(error, NotApproved):
                     result.message = f'the plan-only run failed, so nothing moved: {result.message}'
                 del error  # its traceback holds the program's frames and their memory
@@ -597,6 +618,53 @@ class Engine:
             else:
                 self._emit(ERROR, name, code=result.code, message=result.message)
             return result
+
+    def _execute_with_feedback(self, config: LMPConfig, prepared: PreparedCode, command: str, context: str,
+                               result: CommandResult, watchdog: Any) -> None:
+        """Run the command's program; with `feedback_rounds`, a program that fails while running is followed by a
+        new one, written by the model from what happened (see feedback.py), which continues from the world as it
+        is now. Stops, cancels, limits, the sandbox's refusals and approved runs are final: only a robot call's
+        error or a Python error is fed back. Each round is on the events (GENERATING, CODE, EXECUTING)."""
+        rounds = 0
+        feeding_back = self.feedback_rounds > 0 and self.approval is None  # an approved program is all that runs
+        while True:
+            self.scope.update(self._fixed_names)
+            if feeding_back:
+                self.scope.update(action_recorders(self._fixed_names, self.plan_functions, self._done_actions))
+            try:
+                self._execute(config, prepared, command, context)
+                return
+            except Exception as error:
+                if not feeding_back or not worth_feedback(error):
+                    raise
+                if rounds >= self.feedback_rounds:
+                    self._feedback_note = f' (the program of feedback round {rounds} of {self.feedback_rounds})'
+                    raise
+                failure = error
+                line, source_line, _origin = self._locate(error)
+                what = failure_lines(error, line, source_line, self._done_actions)
+            rounds += 1
+            self._emit(GENERATING, config.name, message=f'{command} (round {rounds} of {self.feedback_rounds} '
+                                                        f'after the program failed: {what[0][2:]})')
+            feedback = feedback_block(config.query_prefix, config.query_suffix, context, command,
+                                      prepared.main.source, what)
+            context = self.context_for(config)  # the scene as it is now
+            query = continue_query(command)
+            try:
+                with watchdog.suspended():  # the model's time is not the program's
+                    prepared = self.generate(config.name, query, context, feedback=feedback)
+            except ExecutionStopped:
+                raise
+            except Exception as again:  # no program to continue with: the command failed as it failed
+                self._feedback_note = (f'; asked to finish the command after that, the model gave no program that '
+                                       f'could run ({bounded_exception_text(again)})')
+                raise failure from None
+            finally:
+                del failure
+            watchdog.check()
+            result.code = f'{result.code}\n\n# round {rounds}, after: {what[0][2:]}\n{prepared.full_code()}'
+            self._emit(CODE, config.name, code=prepared.full_code())
+            self._emit(EXECUTING, config.name, code=result.code)
 
     def _plan(self, config: LMPConfig, prepared: PreparedCode, query: str, context: str) -> list[PlannedCall]:
         """Run the program in plan-only mode (see approval.py) and return the calls it would make of the

@@ -43,6 +43,11 @@ class LmpNodeConfig:
                                    'defines, an object neither on the table nor in the command) is asked for again, '
                                    'sampled, before the command fails; 0: never. Found before the code runs, so a '
                                    'half-done command is never repeated.')
+    feedback_rounds: int = parameter(0, 'Execution feedback: how often a program that failed while running (a robot '
+                                     "call's error, a Python error) is followed by a new one the model writes from "
+                                     'what happened (its program, the error and its line, the robot actions that '
+                                     'completed, the scene now), continuing the command; 0: the paper\'s protocol. '
+                                     'Not with require_approval (the approved program is all that runs).')
     model_file: str = parameter('', 'With llm_backend=local: the GGUF model file; empty: CAP_MODEL_FILE, else the '
                                 'default model `make model` installs.')
     model_threads: int = parameter(1, 'With llm_backend=local: CPU threads of the model server (1 keeps a core for '

@@ -159,7 +159,8 @@ class LmpNode(Node):
         api = guarded_functions(engine_api(self.domain, self.robot.functions()), self.approval_guard,
                                 self._stop_unapproved)
         limits = SandboxLimits(time_limit_s=config.time_limit_s)
-        engine_options = {'regenerations': config.regenerations, 'plan_functions': list(self.domain.plan_functions)}
+        engine_options = {'regenerations': config.regenerations, 'plan_functions': list(self.domain.plan_functions),
+                          'feedback_rounds': config.feedback_rounds}
         self.require_approval = config.require_approval
         self.approval_timeout_s = config.approval_timeout_s
         self.engine: CommandEngine
