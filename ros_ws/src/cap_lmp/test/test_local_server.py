@@ -87,7 +87,7 @@ def test_errors_of_the_local_model_are_model_errors():
 
 
 def _uncached_prompt_tokens(server: LocalModelServer, prompt: str) -> tuple[int, str]:
-    """How many tokens of `prompt` the server had to evaluate (llama.cpp's `timings.prompt_n`), and its greedy answer."""
+    """How many tokens of `prompt` the server evaluated (llama.cpp's `timings.prompt_n`), and its greedy answer."""
     import requests
     reply = requests.post(f'{server.base_url}/completions', timeout=120, json={
         'model': server.model_name, 'prompt': prompt, 'max_tokens': 8, 'temperature': 0.0}).json()
