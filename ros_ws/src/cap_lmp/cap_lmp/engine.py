@@ -175,6 +175,13 @@ def _is_syntax_error(error: Exception) -> bool:
     return isinstance(error, CodeRejected) and 'syntax error' in str(error)
 
 
+def _has_statements(source: str) -> bool:
+    try:
+        return bool(ast.parse(source).body)
+    except (SyntaxError, ValueError, RecursionError, MemoryError):
+        return True  # not for this check to judge: the sandbox's check already passed it
+
+
 def check_program_size(text: str, what: str = "the model's answer") -> None:
     """Refuse a program longer than wire.MAX_PROGRAM_CHARS before it is parsed or run."""
     if len(text) > MAX_PROGRAM_CHARS:
@@ -464,17 +471,18 @@ class Engine:
             out.append((missing.name, self.sandbox.compile_checked(function_tree, source, f'function {missing.name}')))
 
     def generate(self, lmp: str, query: str, context: str = '', variables: Iterable[str] = (),
-                 feedback: str = '') -> PreparedCode:
+                 feedback: str = '', first_attempt: int = 0) -> PreparedCode:
         """Ask the LMP's model for code and prepare it (checked, missing functions generated); nothing runs.
 
         An answer that cannot run at all (a syntax error, a name nothing defines, a generated function that does
         not define itself) is asked for again up to `regenerations` times, sampled at `regeneration_temperature`
         (a small model at temperature 0 gives the same answer again); a refusal of the sandbox is final.
-        `variables`: names the caller sets in the program's scope before it runs; `feedback`: see build_prompt.
+        `variables`: names the caller sets in the program's scope before it runs; `feedback`: see build_prompt;
+        `first_attempt` > 0 samples from the first answer on (as a later attempt is sampled).
         """
         config = self.lmps[lmp]
         variables = tuple(variables)
-        attempt = 0
+        attempt = first_attempt
         while True:
             self._emit(GENERATING, lmp, message=query)
             generated = len(self._stats.generated)
@@ -650,9 +658,18 @@ class Engine:
                                       prepared.main.source, what)
             context = self.context_for(config)  # the scene as it is now
             query = continue_query(command)
+            failed_source = prepared.main.source.strip()
             try:
                 with watchdog.suspended():  # the model's time is not the program's
                     prepared = self.generate(config.name, query, context, feedback=feedback)
+                    if prepared.main.source.strip() == failed_source:
+                        # the same program again would fail the same way: one answer sampled instead (at
+                        # temperature 0 a small model often repeats itself whatever it was told)
+                        self._emit(GENERATING, config.name, message=f'{query} (the model wrote the program that '
+                                                                    'failed again; asking once more, sampled)')
+                        prepared = self.generate(config.name, query, context, feedback=feedback, first_attempt=1)
+                if not _has_statements(prepared.main.source):
+                    raise GenerationError('it wrote no code')  # "nothing left to do" after a failure is not so
             except ExecutionStopped:
                 raise
             except Exception as again:  # no program to continue with: the command failed as it failed

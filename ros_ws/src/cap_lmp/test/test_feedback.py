@@ -89,8 +89,9 @@ def test_a_finishing_program_that_fails_too_ends_the_command_saying_so(server, w
     assert len(server.requests) == 2
 
 
-def test_when_the_model_gives_nothing_to_continue_with_the_first_failure_is_reported(server, world):
-    script(server, finish='put_first_on_second(')  # not Python
+@pytest.mark.parametrize('finish', ['put_first_on_second(', '# nothing left to do'])  # not Python; no code
+def test_when_the_model_gives_nothing_to_continue_with_the_first_failure_is_reported(server, world, finish):
+    script(server, finish=finish)
     result = make_engine(server, world, feedback_rounds=1).run(COMMAND)
     assert not result.success and "there is no object called 'navy bowl'" in result.message
     assert 'asked to finish the command after that, the model gave no program that could run' in result.message
@@ -137,3 +138,17 @@ def test_which_failures_are_fed_back():
     assert not worth_feedback(ExecutionStopped('limit', 'timeout')) and not worth_feedback(MemoryError())
     assert describe_call('put_first_on_second', ('red block', np.array([0.12345, -0.5])), {}) == \
         "put_first_on_second('red block', [0.123, -0.5])"
+
+
+def test_a_finishing_program_that_repeats_the_failed_one_is_asked_for_once_more_sampled(server, world):
+    def respond(request):
+        query = last_query_line(request.prompt)
+        if 'finishing what the program above did not do' in query:
+            return FINISH if request.body.get('seed') is not None else FIRST  # greedy: the same program again
+        return FIRST if COMMAND in query else None
+    server.responder = respond
+    result = make_engine(server, world, feedback_rounds=1, regeneration_temperature=0.7).run(COMMAND)
+    assert result.success, result.message
+    assert world.moves == [('red block', 'red bowl'), ('blue block', 'blue bowl')]
+    sampled = server.requests[2].body
+    assert len(server.requests) == 3 and sampled['temperature'] == 0.7 and sampled['seed'] == 1
