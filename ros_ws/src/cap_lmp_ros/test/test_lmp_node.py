@@ -16,6 +16,7 @@ from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT
 PROGRAMS = {
     'which blocks are there': "say('I see ' + ', '.join(n for n in get_obj_names() if n.endswith('block')))",
     'where is the purple block': "say(str(get_obj_pos('purple block')))",
+    'where is the middle': "say(str([round(float(v), 2) for v in get_obj_pos('the centre of the table')]))",
     'delete your files': "import os\nos.system('rm -rf /tmp/cap-test-victim')",
     'count forever': 'n = 0\nwhile True:\n    n += 1',
     'remember the red block': "chosen = 'red block'",
@@ -75,6 +76,12 @@ def test_unknown_object_is_an_error_naming_it_and_the_next_command_works(graph):
     again = graph.run('which blocks are there')
     assert again.result.success and again.status == GoalStatus.STATUS_SUCCEEDED
     assert again.result.outcome == ExecuteCommand.Result.OUTCOME_DONE
+
+
+def test_a_place_on_the_table_is_a_position_where_no_object_has_its_name(graph):
+    outcome = graph.run('where is the middle')
+    assert outcome.result.success, outcome.result.message
+    assert wait_for(lambda: graph.said) and graph.said[-1] == '[0.0, -0.5]'
 
 
 def test_unsafe_code_is_refused_before_it_runs(graph, tmp_path):

@@ -34,6 +34,30 @@ SPAWN_Y_RANGE: tuple[float, float] = (-0.7, -0.3)
 SPAWN_MIN_SEPARATION = 0.15
 
 
+# Words a person uses for the same place: "the centre of the table", "the upper-left corner", "the right edge".
+_PLACE_WORDS = {'center': 'middle', 'centre': 'middle', 'upper': 'top', 'lower': 'bottom', 'edge': 'side'}
+_PLACE_FILLER = ('the', 'of', 'table', 'table\'s')
+
+
+def named_place(text: str) -> tuple[float, float] | None:
+    """The table position a place name means (a corner, a side, the middle), in the words people use for it;
+    None when `text` names no place. Only whole names: "top left corner" or "the upper-left corner of the table",
+    not "left" alone (the left of what?)."""
+    if not isinstance(text, str) or len(text) > 100:
+        return None
+    words = [_PLACE_WORDS.get(word, word) for word in text.lower().replace('-', ' ').split()
+             if word not in _PLACE_FILLER]
+    if words in (['middle'], ['middle', 'point']):
+        return MIDDLE
+    if len(words) == 3 and words[2] == 'corner' or len(words) == 2 and words[0] in ('top', 'bottom') \
+            and words[1] in ('left', 'right'):
+        vertical, horizontal = sorted(words[:2], key=lambda word: word not in ('top', 'bottom'))
+        return CORNERS.get(f'{vertical} {horizontal} corner')
+    if len(words) == 2 and words[1] == 'side':
+        return SIDES.get(f'{words[0]} side')
+    return None
+
+
 def on_table(x: float, y: float, margin: float = 0.0) -> bool:
     """Whether (x, y) lies over the table top, at least `margin` inside its edges."""
     return (TABLE_X_RANGE[0] + margin <= x <= TABLE_X_RANGE[1] - margin

@@ -61,3 +61,15 @@ def test_optical_orientation_of_the_top_camera_looks_down_with_image_down_toward
     forward = _rotate(optical, [0.0, 0.0, 1.0])
     assert np.allclose(forward, _rotate(cameras.FRONT.orientation, [0.0, 0.0, -1.0]))
     assert np.allclose(_rotate(optical, [0.0, 1.0, 0.0]), -_rotate(cameras.FRONT.orientation, [0.0, 1.0, 0.0]))
+
+
+def test_place_names_in_the_words_people_use_mean_the_tables_named_positions():
+    assert workspace.named_place('middle') == workspace.named_place('the centre of the table') == workspace.MIDDLE
+    assert workspace.named_place('the upper-left corner') == workspace.CORNERS['top left corner']
+    assert workspace.named_place('left top corner') == workspace.named_place('top left') == \
+        workspace.CORNERS['top left corner']
+    assert workspace.named_place('the right edge of the table') == workspace.SIDES['right side']
+    for name in (*workspace.CORNERS, *workspace.SIDES):
+        assert workspace.named_place(name) == {**workspace.CORNERS, **workspace.SIDES}[name]
+    for not_a_place in ('left', 'red block', 'top', 'middle block', 'left right corner', 'top top corner', '', 7):
+        assert workspace.named_place(not_a_place) is None, not_a_place

@@ -17,7 +17,9 @@ from rclpy.node import Node
 from cap_interfaces.action import PickPlace
 from cap_interfaces.msg import GraphNames
 from cap_lmp.errors import RobotApiError, StoppedError
+from cap_lmp_ros.domains.object_names import object_name_candidate
 from cap_lmp_ros.domains.ros_api import MAX_NAME_CHARS, MAX_SAY_CHARS, RosRobotApi
+from cap_tabletop.workspace import named_place
 
 
 class RosTabletopApi(RosRobotApi):
@@ -59,6 +61,22 @@ class RosTabletopApi(RosRobotApi):
         return self.get_obj_pos(name)
 
     # -------------------------------------------------------------------------------------------- perception
+    def _place(self, name: Any) -> tuple[str, np.ndarray] | None:
+        """A place on the table that `name` means ("the middle", "the top left corner"), when no object on the
+        table has that name: (its name as given, its position). A program passes a place where an object or a
+        position is expected; what it means is not in doubt."""
+        candidate = object_name_candidate(name)
+        place = named_place(candidate) if candidate else None
+        if place is None or candidate in self.get_obj_names():
+            return None
+        return candidate, np.array(place, dtype=float)
+
+    def get_obj_pos(self, name: str) -> np.ndarray:
+        """Centre of the object on the table, np.array([x, y]) in metres; for a place on the table ("the
+        middle", "the bottom left corner"), that place."""
+        place = self._place(name) if isinstance(name, str) and name not in self._known_names else None
+        return place[1].copy() if place is not None else super().get_obj_pos(name)
+
     def get_bbox(self, name: str) -> np.ndarray:
         """The object's footprint on the table, np.array([x_min, y_min, x_max, y_max]) in metres."""
         state = self._object(name)
@@ -85,6 +103,9 @@ class RosTabletopApi(RosRobotApi):
         goal = PickPlace.Goal(object_name=obj_name)
         if isinstance(target, (list, tuple)) and len(target) == 1 and isinstance(target[0], str):
             target = target[0]  # a one-name list, as parse_obj_name answers
+        place = self._place(target) if isinstance(target, str) and target not in self._known_names else None
+        if place is not None:  # "the middle": that point of the table
+            where, target = f'the {place[0]}', place[1]
         if isinstance(target, str):
             target = self._name(target)
             goal.target_name = target
@@ -98,7 +119,7 @@ class RosTabletopApi(RosRobotApi):
             if not (np.isfinite(x) and np.isfinite(y)):
                 raise RobotApiError(f'the target position ({x}, {y}) is not a number')
             goal.target_position = Point(x=x, y=y, z=0.0)
-            where = f'({x:.3f}, {y:.3f})'
+            where = where if place is not None else f'({x:.3f}, {y:.3f})'
         result = self._run_goal(self._pick_place, goal, 'the pick-and-place controller',
                                 f'the pick-and-place controller refused to move the {obj_name}')
         if self.stop_requested.is_set() or result.error_code == PickPlace.Result.CANCELLED:
