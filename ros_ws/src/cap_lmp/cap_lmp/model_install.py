@@ -14,7 +14,7 @@ import sys
 import tempfile
 import zipfile
 
-from cap_lmp.local_model import DEFAULT_MODEL, ModelFile, cache_dir
+from cap_lmp.local_model import DEFAULT_MODEL, DRAFT_MODEL, ModelFile, cache_dir
 
 CHUNK = 1 << 20
 
@@ -77,9 +77,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--cache', type=pathlib.Path, default=None, help='cache folder (default: CAP_CACHE or '
                         '~/.cache/cap-ros); the model goes to CACHE/models/')
+    parser.add_argument('--draft', action='store_true', help='the 0.5B draft model of benchmarks/speculative.py '
+                        'instead of the default model')
     args = parser.parse_args(argv)
     try:
-        install(DEFAULT_MODEL, (args.cache or cache_dir()) / 'models')
+        install(DRAFT_MODEL if args.draft else DEFAULT_MODEL, (args.cache or cache_dir()) / 'models')
     except (RuntimeError, subprocess.CalledProcessError, OSError) as error:
         print(f'model install failed: {error}', file=sys.stderr)
         return 1
