@@ -164,7 +164,7 @@ def test_the_table_top_demo_runs_on_the_stand_in_through_the_drivers_names(ros_c
     try:
         assert user.spin_until(user.execute.server_is_ready, GRAPH_START_S), _end(graph)
         assert user.spin_until(lambda: user.sees(tabletop_demo.SCENE), 60.0), \
-            f'perception never saw the scene:\n{_end(graph)[-3000:]}'
+            f'perception never saw the scene (stand-in: {robot.failure or "running"}):\n{_end(graph)[-3000:]}'
         for step in tabletop_demo.STEPS:
             before = _positions(robot.world)
             result = user.run(step.command)

@@ -77,6 +77,11 @@ class StandIn:
         self._spinner.start()
 
     @property
+    def failure(self) -> str:
+        """Why the stand-in's executor thread died ('' while it runs): a robot whose drivers stopped answering."""
+        return self._watch.failure
+
+    @property
     def world(self):
         """The stand-in's world: the truth about the robot and the objects, for the owner only."""
         return self.nodes['sim_bridge'].world
