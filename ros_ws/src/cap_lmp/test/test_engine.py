@@ -19,12 +19,6 @@ SCENE = {'red block': (-0.1, -0.4), 'blue block': (0.1, -0.45), 'green block': (
 
 
 @pytest.fixture
-def server():
-    with ScriptedOpenAIServer() as scripted:
-        yield scripted
-
-
-@pytest.fixture
 def world() -> ToyWorld:
     return ToyWorld.with_objects(SCENE)
 

@@ -12,7 +12,7 @@ from cap_lmp.isolated_engine import IsolatedEngine
 from cap_lmp.llm import OpenAICompatibleClient
 from cap_lmp.outcome import Outcome
 from cap_lmp.sandbox import SandboxLimits
-from cap_lmp.testing.openai_server import ScriptedOpenAIServer, last_query_line
+from cap_lmp.testing.openai_server import last_query_line
 from cap_lmp.testing.toy_domain import ACTING_FUNCTIONS, build_engine
 from cap_lmp.testing.toy_world import ToyWorld
 
@@ -23,12 +23,6 @@ COMMAND = 'put each block in the bowl of its colour'
 FIRST = ("put_first_on_second('red block', 'red bowl')\n"
          "put_first_on_second('blue block', 'navy bowl')")
 FINISH = "put_first_on_second('blue block', 'blue bowl')"
-
-
-@pytest.fixture
-def server():
-    with ScriptedOpenAIServer() as scripted:
-        yield scripted
 
 
 @pytest.fixture

@@ -8,18 +8,12 @@ from cap_lmp.engine import GENERATING
 from cap_lmp.llm import OpenAICompatibleClient
 from cap_lmp.outcome import Outcome
 from cap_lmp.sandbox import SandboxLimits
-from cap_lmp.testing.openai_server import ScriptedOpenAIServer, by_attempt
+from cap_lmp.testing.openai_server import by_attempt
 from cap_lmp.testing.toy_domain import build_engine
 from cap_lmp.testing.toy_world import ToyWorld
 
 SCENE = {'red block': (-0.1, -0.4), 'blue block': (0.1, -0.45), 'red bowl': (-0.15, -0.65),
          'blue bowl': (0.15, -0.3)}
-
-
-@pytest.fixture
-def server():
-    with ScriptedOpenAIServer() as scripted:
-        yield scripted
 
 
 @pytest.fixture
