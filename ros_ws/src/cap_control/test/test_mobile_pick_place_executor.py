@@ -128,6 +128,17 @@ def test_with_the_hands_full_a_pick_is_refused_and_with_nothing_held_a_place():
     assert robot_.goals == []
 
 
+def test_a_point_another_object_stands_on_is_refused_before_the_base_moves():
+    robot_ = Robot({'coke can': ON_TABLE})
+    run = executor(robot_)
+    run.held = Held('water bottle', (0.065, 0.065, 0.21), 0.05, 0.065)
+    outcome = run.run(MobileRequest(TASK_PLACE_AT_POSITION, target_xy=(ON_TABLE[0] + 0.03, ON_TABLE[1])),
+                      Interruption())
+    assert outcome.code == MobileErrorCode.OUTSIDE_WORKSPACE, outcome.message
+    assert 'the coke can at' in outcome.message and 'is in the way' in outcome.message
+    assert robot_.goals == [] and run.held is not None  # nothing moved; the bottle is still held
+
+
 def test_the_base_is_sent_to_face_the_table_from_the_near_side_and_a_failed_drive_is_unreachable():
     robot_ = Robot({'coke can': ON_TABLE}, navigation_code=9101)
     outcome = executor(robot_).run(MobileRequest(TASK_PICK, 'coke can'), Interruption())

@@ -22,7 +22,7 @@ from cap_control.mobile_pick_place.plan import (
 )
 from cap_control.navigation.plan import OccupancyGrid
 from cap_control.pick_place.executor import ExecutionConfig, PickPlaceOutcome, PlanRun
-from cap_control.pick_place.plan import PickPlaceConfig, PickPlaceError, StageName
+from cap_control.pick_place.plan import ObjectInfo, PickPlaceConfig, PickPlaceError, StageName, overlapping_at
 from cap_control.ports import (
     Arm, Ending, Failed, Gripper, Interrupted, Interruption, PendingGoal, Perception, interruption_message,
 )
@@ -132,6 +132,8 @@ class MobilePickPlaceExecutor:
         if piece.kind == 'bin':  # let it fall in from above the rim: the arm does not reach down into a bin
             drop_from = piece.top - robot.ARM_MOUNT[2]
             what = f'the {piece.name}'
+        if request.task != TASK_PLACE_AT_OBJECT and drop_from is None:
+            self._refuse_taken_spot(run, held, xy, rest_z)
         keep_clear = self._others_on(run, piece, held.name)
         self._drive(run, xy, piece, keep_clear, feedback)
         base = self._base_pose(run)
@@ -149,6 +151,21 @@ class MobilePickPlaceExecutor:
         if not report.success:
             raise Failed(code, report.message or f'no object named {name!r}')
         return report
+
+    @staticmethod
+    def _refuse_taken_spot(run: PlanRun, held: Held, xy: Sequence[float], rest_z: float) -> None:
+        """A point another object stands on is refused before the base moves: the held object would come down on
+        it, tilt and fall (a bottle set on an orange), and pressed between the fingers and the other object, the
+        physics of a simulator can fail too. The table top refuses such a point the same way."""
+        others = [report.info for report in run.other_objects(held.name) or ()]
+        placed = ObjectInfo(held.name, (float(xy[0]), float(xy[1]), float(rest_z)), held.size)
+        taken = overlapping_at(placed, xy, others)
+        if taken:
+            other = min(taken, key=lambda info: float(np.hypot(info.position[0] - xy[0], info.position[1] - xy[1])))
+            raise Failed(MobileErrorCode.OUTSIDE_WORKSPACE,
+                         f'cannot put the {held.name} down at ({xy[0]:.2f}, {xy[1]:.2f}): the {other.name} at '
+                         f'({other.position[0]:.2f}, {other.position[1]:.2f}) is in the way. Choose a free spot, or '
+                         f'put it on the {other.name} by name')
 
     @staticmethod
     def _others_on(run: PlanRun, piece: layout.Furniture, exclude: str) -> list[tuple[float, float]]:
