@@ -253,7 +253,7 @@ class Engine:
         self.regenerations = regenerations
         self.regeneration_temperature = regeneration_temperature
         # Execution feedback: how often a program that failed while running (a robot call's error, a Python error)
-        # is followed by a new one the model writes knowing what happened (see _finish_after). 0: the paper's
+        # is followed by a new one the model writes knowing what happened (see _execute_with_feedback). 0: the paper's
         # protocol, one program per command.
         self.feedback_rounds = max(0, int(feedback_rounds))
         self._done_actions: list[str] = []  # the robot actions of the running command that completed
@@ -652,8 +652,9 @@ class Engine:
                 line, source_line, _origin = self._locate(error)
                 what = failure_lines(error, line, source_line, self._done_actions)
             rounds += 1
+            stopped = what[0].removeprefix('# ')  # where and why, in words
             self._emit(GENERATING, config.name, message=f'{command} (round {rounds} of {self.feedback_rounds} '
-                                                        f'after the program failed: {what[0][2:]})')
+                                                        f'after the program failed: {stopped})')
             feedback = feedback_block(config.query_prefix, config.query_suffix, context, command,
                                       prepared.main.source, what)
             context = self.context_for(config)  # the scene as it is now
@@ -679,7 +680,7 @@ class Engine:
             finally:
                 del failure
             watchdog.check()
-            result.code = f'{result.code}\n\n# round {rounds}, after: {what[0][2:]}\n{prepared.full_code()}'
+            result.code = f'{result.code}\n\n# round {rounds}, after: {stopped}\n{prepared.full_code()}'
             self._emit(CODE, config.name, code=prepared.full_code())
             self._emit(EXECUTING, config.name, code=result.code)
 

@@ -253,8 +253,7 @@ class LocalModelServer:
         directory = pathlib.Path(folder) if folder else cache_dir() / 'prompt-kv'
         try:
             directory.mkdir(parents=True, exist_ok=True)
-            store = PromptStore.for_server(directory, model, binary.resolve() if binary.exists() else binary,
-                                           self.settings.context_size)
+            store = PromptStore.for_server(directory, model, binary, self.settings.context_size)
             store.prune()
             return store
         except OSError as error:  # a read-only home: the prompts are read at every start, as before

@@ -65,6 +65,8 @@ class RosTabletopApi(RosRobotApi):
         """A place on the table that `name` means ("the middle", "the top left corner"), when no object on the
         table has that name: (its name as given, its position). A program passes a place where an object or a
         position is expected; what it means is not in doubt."""
+        if not isinstance(name, str) or name in self._known_names:
+            return None
         candidate = object_name_candidate(name)
         place = named_place(candidate) if candidate else None
         if place is None or candidate in self.get_obj_names():
@@ -74,7 +76,7 @@ class RosTabletopApi(RosRobotApi):
     def get_obj_pos(self, name: str) -> np.ndarray:
         """Centre of the object on the table, np.array([x, y]) in metres; for a place on the table ("the
         middle", "the bottom left corner"), that place."""
-        place = self._place(name) if isinstance(name, str) and name not in self._known_names else None
+        place = self._place(name)
         return place[1].copy() if place is not None else super().get_obj_pos(name)
 
     def get_bbox(self, name: str) -> np.ndarray:
@@ -103,7 +105,7 @@ class RosTabletopApi(RosRobotApi):
         goal = PickPlace.Goal(object_name=obj_name)
         if isinstance(target, (list, tuple)) and len(target) == 1 and isinstance(target[0], str):
             target = target[0]  # a one-name list, as parse_obj_name answers
-        place = self._place(target) if isinstance(target, str) and target not in self._known_names else None
+        place = self._place(target)
         if place is not None:  # "the middle": that point of the table
             where, target = f'the {place[0]}', place[1]
         if isinstance(target, str):
