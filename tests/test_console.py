@@ -104,7 +104,9 @@ class Rig:
         rclpy.init(context=self.context, domain_id=self.domain)
         cassette = folder / 'console.yaml'
         cassette.write_text(CASSETTE, encoding='utf-8')
-        self.graph = Graph(self.context, GraphOptions(seed=2, objects=OBJECTS, cassette=str(cassette)))
+        # Rehearsed on a twin when approval is required: the approval shows the twin's picture.
+        self.graph = Graph(self.context, GraphOptions(seed=2, objects=OBJECTS, cassette=str(cassette),
+                                                      rehearse='on_approval'))
         self.world = self.graph.world
         self.lmp = self.graph.nodes['lmp_node']
         self.markers: list[MarkerArray] = []
@@ -257,6 +259,10 @@ def test_approval_holds_a_command_until_approved_and_drops_it_when_rejected(rig)
         rig.run('put the blue block in the blue bowl')
         page.locator('#approval').wait_for()
         assert page.locator('#plan li').all_text_contents() == ['put the blue block on the blue bowl']
+        # The rehearsal on the twin: its picture beside the live cameras, its summary in the message.
+        page.locator('#twin-image').wait_for()
+        assert _wait(lambda: page.evaluate("document.getElementById('twin-image').naturalWidth") == 320, 30)
+        assert 'rehearsed on the twin (1 action(s)' in page.text_content('#current-message')
         assert "put_first_on_second('blue block', 'blue bowl')" in page.text_content('#current-code')
         # Held: simulated time passes, nothing moves, the command still waits.
         arm, since = world.joint_positions(), world.time

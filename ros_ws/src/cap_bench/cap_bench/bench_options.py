@@ -24,6 +24,7 @@ class BenchOptions:
     model_file: str = ''  # for backend=local; empty: the default model of `make model`
     model_threads: int = 1
     feedback_rounds: int = 0  # for policy=llm: lmp_node's feedback_rounds (0: the paper's protocol)
+    rehearse: str = 'off'  # lmp_node's rehearse: 'always' rehearses every program on a twin first
 
 
 def policy_name(options: BenchOptions) -> str:

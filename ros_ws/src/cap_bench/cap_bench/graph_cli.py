@@ -142,6 +142,9 @@ class GraphBench:
             parser.add_argument('--resume', action='store_true', help='keep the episodes already in --out')
         parser.add_argument('--episode-timeout', type=float, default=self.episode_timeout,
                             help=f'seconds per {self.timeout_per} [{self.episode_timeout:g}]')
+        parser.add_argument('--rehearse', choices=('off', 'always'), default='off',
+                            help='always: rehearse every program on a twin of the scene before the robot moves, and '
+                                 'record the prediction against the outcome per episode [off]')
         self.add_arguments(parser)
         return parser
 
@@ -154,7 +157,8 @@ class GraphBench:
         domain_ids(getattr(args, 'jobs', 1))
         shared = {'trials': args.trials, 'base_seed': args.seed} if self.trials is not None else {}
         return BenchOptions(policy=args.policy, out=args.out, resume=getattr(args, 'resume', False),
-                            episode_timeout_s=args.episode_timeout, **shared, **model_settings(args))
+                            episode_timeout_s=args.episode_timeout, rehearse=args.rehearse, **shared,
+                            **model_settings(args))
 
     def run(self, options: BenchOptions, args: argparse.Namespace) -> dict:
         """Run the benchmark; its summary."""

@@ -37,6 +37,17 @@ def outcome_name(outcome: int) -> str:
     return name_of(outcome)
 
 
+def prediction_fields(results: Sequence[Any]) -> dict[str, Any]:
+    """An episode's record of its rehearsals (ExecuteCommand results): whether its programs were rehearsed, and
+    where the world differed from the twin's prediction."""
+    rehearsed = [r for r in results if r.rehearsed]
+    if not rehearsed:
+        return {}
+    return {'rehearsed': len(rehearsed), 'prediction': ' | '.join(r.prediction for r in rehearsed if r.prediction),
+            'prediction_misses': [{'name': m.name, 'distance_m': round(m.distance, 4), 'unexpected': m.unexpected}
+                                  for r in rehearsed for m in r.prediction_misses]}
+
+
 class GraphClient:
     """A graph in this process, running the run's policy (see bench_options.lmp_parameters), and a client node that
     resets its scene and session and sends it instructions. A call without an answer in time raises TimeoutError:
@@ -60,6 +71,7 @@ class GraphClient:
         rclpy.init(context=self.context)
         self.backend, lmp = lmp_parameters(options)
         extra = {'lmp_node': lmp, **graph.pop('extra', {})}
+        graph.setdefault('rehearse', options.rehearse)
         self.graph = Graph(self.context, GraphOptions(llm_backend=self.backend,
                                                       cassette=str(cassette) if cassette else '', extra=extra,
                                                       **graph))

@@ -310,6 +310,9 @@ def approve(approved: bool, reason: str, command_id: str, server_timeout: float,
         if status is not None:
             _say(f'{command_id}: {status.command}\n' + '\n'.join('    ' + line for line in status.code.splitlines()))
             _say('plan: ' + ('; '.join(step.description for step in status.plan) or 'no robot action'))
+            rehearsed = status.message.partition('; rehearsed on the twin')[2]
+            if rehearsed:  # what the rehearsal on the twin found (the console shows its picture too)
+                _say('rehearsed on the twin' + rehearsed)
         future = client.call_async(ApproveCommand.Request(command_id=command_id, approve=approved, reason=reason))
         if not session.spin_until(future.done, server_timeout):
             _error(f'error: lmp_node did not answer within {server_timeout:g} s (--wait)')
@@ -531,7 +534,7 @@ def standin(profile_path: str, seed: int, objects: str, perturbation_seed: int, 
 def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, cassette: str,
        record: bool, namespace: str = '', domain: str = 'tabletop', cpu: int = 0, model_file: str = '',
        model_threads: int = 1, console_port: int | None = None, require_approval: bool = False,
-       hardware: str = '', preflight_wait: float = 5.0, feedback_rounds: int = 0) -> int:
+       hardware: str = '', preflight_wait: float = 5.0, feedback_rounds: int = 0, rehearse: str = '') -> int:
     """Bring up sim bridge, perception, pick-and-place and lmp_node in this process until Ctrl-C or SIGTERM (and,
     with `console_port`, the web console in a process of its own beside it). With `hardware` (a profile), the
     graph of that real robot instead, once its preflight has passed.
@@ -574,7 +577,8 @@ def up(seed: int, objects: str, real_time: bool, perception: str, backend: str, 
             graph = Graph(context, GraphOptions(seed=seed, objects=objects, real_time=real_time,
                                                 perception=perception, llm_backend=backend, cassette=cassette,
                                                 record_cassette=record, namespace=namespace, domain=domain,
-                                                cpu=cpu, extra={'lmp_node': lmp} if lmp else {}, hardware=hardware))
+                                                cpu=cpu, extra={'lmp_node': lmp} if lmp else {}, hardware=hardware,
+                                                rehearse=rehearse))
         except (ValueError, CapLLMError) as error:  # a configuration the user can fix: say what, in one line
             _error(f'error: {one_line(str(error))}')
             return EXIT_UNREACHABLE
@@ -710,6 +714,10 @@ def build_parser() -> argparse.ArgumentParser:
     p_up.add_argument('--feedback-rounds', type=int, default=0, help='a program that failed while running is '
                       'followed by one the model writes from what happened, up to this many times per command '
                       '(lmp_node\'s feedback_rounds); 0: one program per command, the paper\'s protocol [0]')
+    p_up.add_argument('--rehearse', choices=('always', 'on_approval', 'off'), default='',
+                      help='rehearse each program on a twin of the scene (a simulator beside the graph) before the '
+                      'robot moves; a program that fails or does harm there is refused [off in simulation, always '
+                      'with --hardware]')
     p_up.add_argument('--require-approval', action='store_true', help='hold each generated program until it is '
                       'approved (cap approve, or the console), after a plan-only run lists its robot actions')
     p_up.add_argument('--console', action='store_true', help='also serve the web console (cap console) on '
@@ -791,7 +799,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return up(args.seed, args.objects, not args.fast, args.perception, args.backend, args.cassette, args.record,
                   args.namespace, args.domain, args.cpu, args.model_file, args.model_threads,
                   args.console_port if args.console else None, args.require_approval, args.hardware,
-                  args.preflight_wait, args.feedback_rounds)
+                  args.preflight_wait, args.feedback_rounds, args.rehearse)
     if args.command == 'preflight':
         return preflight(args.profile, args.wait)
     if args.command == 'standin':

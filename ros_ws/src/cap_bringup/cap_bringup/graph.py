@@ -35,10 +35,11 @@ from rclpy.parameter import Parameter
 
 from cap_bringup.cpu_affinity import pin_to_one_cpu
 from cap_bringup.namespaces import normalise_namespace
-from cap_bringup.nodes import LMP_NODE, SIM_BRIDGE_NODE, graph_nodes, node_class
+from cap_bringup.nodes import LMP_NODE, SIM_BRIDGE_NODE, graph_nodes, node_class, twin_nodes, twin_parameters
 from cap_bringup.qos_events import drop_default_event_handlers
 from cap_interfaces.msg import GraphNames
 from cap_lmp_ros.domains.registry import get_domain
+from cap_lmp_ros.twin import twin_namespace
 from cap_lmp_ros.thread_watch import ThreadWatch
 
 
@@ -90,6 +91,12 @@ class GraphOptions:
     # A hardware profile (cap_hardware; a file or a shipped profile's name): no simulator, the profile's robot
     # instead, its domain, RGB-D perception; the options above that concern the simulator are not used.
     hardware: str = ''
+    # Rehearse programs on a twin (lmp_node's rehearse: always, on_approval, off); empty: always in hardware mode,
+    # off in simulation. When not off, the twin's nodes run under <namespace>/twin.
+    rehearse: str = ''
+
+    def rehearse_mode(self) -> str:
+        return self.rehearse or ('always' if self.hardware else 'off')
 
     def profile(self):
         """The hardware profile (None in simulation)."""
@@ -113,13 +120,16 @@ class GraphOptions:
                 values['lmp_node']['cassette'] = str(pathlib.Path(self.cassette).resolve())
             values = {spec.name: values.get(spec.name, {'use_sim_time': False})
                       for spec in graph_nodes(domain, hardware=True)}
+            if self.rehearse:
+                values['lmp_node']['rehearse'] = self.rehearse
             for node, parameters in self.extra.items():
                 values.setdefault(node, {}).update(parameters)
             return values
         domain = get_domain(self.domain)
         if self.perception == 'rgbd' and self.camera_rate <= 0:
             raise ValueError('perception rgbd reads camera images: camera_rate must be above 0')
-        lmp = {'llm_backend': self.llm_backend, 'record_cassette': self.record_cassette, 'domain': self.domain}
+        lmp = {'llm_backend': self.llm_backend, 'record_cassette': self.record_cassette, 'domain': self.domain,
+               'rehearse': self.rehearse_mode()}
         if self.cassette:
             lmp['cassette'] = str(pathlib.Path(self.cassette).resolve())
         chosen = {
@@ -139,6 +149,14 @@ class GraphOptions:
                 values[spec.name]['use_sim_time'] = True
         for node, parameters in self.extra.items():
             values.setdefault(node, {}).update(parameters)
+        return values
+
+    def twin_overrides(self) -> dict[str, dict[str, Any]]:
+        """{node name: {parameter: value}} of the twin's nodes (cap_bringup.nodes.twin_parameters), with the extra
+        parameters given for them under 'twin/<node name>'."""
+        values = twin_parameters(get_domain(self.domain_name()))
+        for name, parameters in values.items():
+            parameters.update(self.extra.get(f'twin/{name}', {}))
         return values
 
 
@@ -319,21 +337,20 @@ class Graph:
         self.hardware = profile is not None
         try:
             self.domain = get_domain(options.domain_name())
+            # The twin first (when programs are rehearsed): lmp_node finds it running.
+            self.twin_placed = namespace_arguments(twin_namespace(self.namespace or '/'))
+            if overrides.get('lmp_node', {}).get('rehearse', 'off') != 'off':  # lmp_node will rehearse
+                twin_values = options.twin_overrides()
+                for spec in twin_nodes(self.domain):
+                    self._add_node(spec, f'twin/{spec.name}', twin_values.get(spec.name, {}), self.twin_placed)
             for spec in graph_nodes(self.domain, hardware=self.hardware):
-                from_config = config_parameters(spec.package, spec.config_file)
-                values = {**from_config.get('/**', {}), **from_config.get(spec.name, {}),
-                          **overrides.get(spec.name, {})}
                 # lmp_node's worker thread reports its death to the graph's watch, like the executors' threads.
                 watched = {'thread_watch': self._watch} if spec is LMP_NODE else {}
                 given = (node_arguments or {}).get(spec.name, {})  # a test's own constructor arguments
-                node = node_class(spec)(context=context, parameter_overrides=[
-                    Parameter(name, value=value) for name, value in values.items()], **placed, **watched, **given)
-                self.nodes[spec.name] = node
-                if is_quick(spec.name, values):
-                    quick.add_node(node)
-                else:  # a wait set rebuilt in Python at every wake-up: only what can wake it (qos_events.py)
-                    drop_default_event_handlers(node)
-                    self.executor.add_node(node)
+                self._add_node(spec, spec.name, overrides.get(spec.name, {}), placed, {**watched, **given})
+            twin = getattr(self.nodes['lmp_node'], 'twin', None)
+            if twin is not None:  # its robot API's clients, on the twin's clock
+                quick.add_node(twin.node)
             # Perception's answers reach every client of its services in the process, waking each client's
             # executor: all of them live on the events executor, where a wake-up for another client is cheap.
             sim_time = [Parameter('use_sim_time', value=not self.hardware)]
@@ -356,8 +373,9 @@ class Graph:
                 bind_perception = getattr(node, 'bind_perception_clients', None)
                 if bind_perception is None:
                     continue
-                clients = rclpy.create_node(f'{name}_perception_clients', context=context,
-                                            parameter_overrides=sim_time, **placed)
+                clients = rclpy.create_node(f'{name.rpartition("/")[2]}_perception_clients', context=context,
+                                            parameter_overrides=self._sim_time(name, sim_time),
+                                            **self._placement(name, placed))
                 self.client_nodes.append(clients)
                 quick.add_node(clients)
                 bind_perception(clients)
@@ -368,8 +386,9 @@ class Graph:
                 bind_quick = getattr(node, 'bind_quick', None)
                 if bind_quick is None:
                     continue
-                endpoints = rclpy.create_node(f'{name}_quick', context=context, parameter_overrides=sim_time,
-                                              **placed)
+                endpoints = rclpy.create_node(f'{name.rpartition("/")[2]}_quick', context=context,
+                                              parameter_overrides=self._sim_time(name, sim_time),
+                                              **self._placement(name, placed))
                 self.client_nodes.append(endpoints)
                 quick.add_node(endpoints)
                 bind_quick(endpoints)
@@ -380,6 +399,28 @@ class Graph:
         _close_at_exit(self)
         for spinner in self._spinners:
             spinner.start()
+
+    def _add_node(self, spec, key: str, overrides: dict[str, Any], placed: dict[str, Any],
+                  arguments: dict[str, Any] | None = None) -> None:
+        """Make the node `spec` names with its package's config and `overrides`, keep it as self.nodes[key] and
+        put it on the executor that suits it."""
+        from_config = config_parameters(spec.package, spec.config_file)
+        values = {**from_config.get('/**', {}), **from_config.get(spec.name, {}), **overrides}
+        node = node_class(spec)(context=self.context, parameter_overrides=[
+            Parameter(name, value=value) for name, value in values.items()], **placed, **(arguments or {}))
+        self.nodes[key] = node
+        if is_quick(spec.name, values):
+            self._spinners[1].executor.add_node(node)
+        else:  # a wait set rebuilt in Python at every wake-up: only what can wake it (qos_events.py)
+            drop_default_event_handlers(node)
+            self.executor.add_node(node)
+
+    def _placement(self, key: str, placed: dict[str, Any]) -> dict[str, Any]:
+        """Where a helper node of self.nodes[key] goes: beside it, in the twin's namespace for a twin's node."""
+        return self.twin_placed if key.startswith('twin/') else placed
+
+    def _sim_time(self, key: str, sim_time: list) -> list:
+        return [Parameter('use_sim_time', value=True)] if key.startswith('twin/') else sim_time
 
     def __enter__(self) -> 'Graph':
         return self

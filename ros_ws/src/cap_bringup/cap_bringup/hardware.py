@@ -53,7 +53,10 @@ def hardware_overrides(profile: HardwareProfile) -> dict[str, dict[str, Any]]:
                             'world_frame': profile.world_frame},
         'pick_place': _pick_place(profile),
         'follow_path': _arm(profile),
-        'lmp_node': {'domain': profile.domain, 'require_approval': profile.require_approval},
+        # Programs are rehearsed on a twin first (the profile says when); the twin starts its arm where the robot's is.
+        'lmp_node': {'domain': profile.domain, 'require_approval': profile.require_approval,
+                     'rehearse': profile.rehearse,
+                     'twin_joint_states_topic': profile.arm.joint_states, 'twin_arm_joints': list(profile.arm.joints)},
         'visualization': {'frame_id': profile.world_frame},
     }
     navigation = profile.navigation

@@ -10,6 +10,7 @@ described without importing its nodes; the one-process graph loads the classes, 
 from __future__ import annotations
 
 import importlib
+from typing import Callable
 
 from cap_lmp_ros.domains.registry import Domain, NodeSpec
 
@@ -34,6 +35,42 @@ def graph_nodes(domain: Domain, hardware: bool = False) -> tuple[NodeSpec, ...]:
     return (SIM_BRIDGE_NODE, ROBOT_STATE_NODE, *domain.nodes, LMP_NODE, VISUALIZATION_NODE)
 
 
+# The twin's simulator while no rehearsal runs: simulated seconds per wall second (it waits for the next command).
+TWIN_IDLE_SPEED = 1.0
+
+
+def twin_nodes(domain: Domain) -> tuple[NodeSpec, ...]:
+    """The nodes of the twin that rehearses `domain`'s programs (under <namespace>/twin): the simulator and the
+    domain's perception and control nodes, those that stand in for a robot's servers included."""
+    return (SIM_BRIDGE_NODE, *domain.nodes)
+
+
+def twin_parameters(domain: Domain) -> dict[str, dict]:
+    """{node name: {parameter: value}} of the twin's nodes, beside their packages' config files: the domain's scene
+    simulated as fast as it goes, without cameras, watching for harm; ground-truth perception; every node but the
+    simulator on the twin's clock. The same in simulation and on a real robot: the twin is always a simulator."""
+    chosen = {'sim_bridge': {'scene': domain.scene, 'real_time': False, 'camera_rate': 0.0, 'twin': True,
+                             'idle_speed': TWIN_IDLE_SPEED},
+              'perception_node': {'source': 'ground_truth'}, 'pick_place': {'clear_view': False}}
+    return {spec.name: {**chosen.get(spec.name, {}), **({} if spec is SIM_BRIDGE_NODE else {'use_sim_time': True})}
+            for spec in twin_nodes(domain)}
+
+
+def twin_launch_arguments(domain: Domain, namespace: str, rehearse: str,
+                          config_file: Callable[[str, str], str]) -> list[dict]:
+    """The arguments of launch_ros's Node for each of the twin's nodes, under <namespace>/twin on its own clock,
+    when lmp_node rehearses (`rehearse` neither empty nor off); `config_file(package, filename)` is the path of a
+    package's config file. What the launch files start; `cap up` starts the same nodes in one process."""
+    if rehearse in ('', 'off'):
+        return []
+    twin = f"{namespace.rstrip('/')}/twin"
+    parameters = twin_parameters(domain)
+    return [{'package': spec.package, 'executable': spec.executable, 'name': spec.name, 'namespace': twin,
+             'remappings': [('/clock', f'{twin}/clock')], 'output': 'screen',
+             'parameters': [config_file(spec.package, spec.config_file), parameters[spec.name]]}
+            for spec in twin_nodes(domain)]
+
+
 def node_class(spec: NodeSpec) -> type:
     """The class a NodeSpec names ('module:Class'); ValueError (one line) if it cannot be loaded."""
     module_name, _, class_name = spec.node_class.partition(':')
@@ -44,4 +81,4 @@ def node_class(spec: NodeSpec) -> type:
 
 
 __all__ = ['CALIBRATION_NODE', 'LMP_NODE', 'ROBOT_STATE_NODE', 'SIM_BRIDGE_NODE', 'VISUALIZATION_NODE', 'graph_nodes',
-           'node_class']
+           'node_class', 'twin_launch_arguments', 'twin_nodes', 'twin_parameters']

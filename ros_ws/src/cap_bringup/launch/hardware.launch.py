@@ -20,7 +20,7 @@ from launch_ros.actions import Node
 
 from cap_bringup.hardware import hardware_overrides
 from cap_bringup.namespaces import normalise_namespace
-from cap_bringup.nodes import graph_nodes
+from cap_bringup.nodes import graph_nodes, twin_launch_arguments
 from cap_hardware.profile import load_profile
 from cap_lmp_ros.domains.registry import get_domain
 
@@ -29,6 +29,7 @@ ARGUMENTS = (
     ('namespace', 'namespace of the graph, e.g. robot1 (empty: none)'),
     ('llm_backend', 'cassette, http (CAP_LLM_BASE_URL, CAP_LLM_MODEL from the environment) or local'),
     ('console', 'true: also the web console on 127.0.0.1 (port 8765)'),
+    ('rehearse', 'always (the default on a robot), on_approval or off: rehearse each program on a twin first'),
 )
 
 
@@ -46,11 +47,17 @@ def _nodes(context):
     chosen = hardware_overrides(profile)
     if value['llm_backend']:
         chosen['lmp_node']['llm_backend'] = value['llm_backend']
+    if value['rehearse']:
+        chosen['lmp_node']['rehearse'] = value['rehearse']
     console = [Node(package='cap_bringup', executable='console', name='console', **common)] \
         if value['console'].lower() == 'true' else []
-    return console + [Node(package=spec.package, executable=spec.executable, name=spec.name,
-                           parameters=[_config(spec.package, spec.config_file), chosen.get(spec.name, {})], **common)
-                      for spec in graph_nodes(domain, hardware=True)]
+    robot = [Node(package=spec.package, executable=spec.executable, name=spec.name,
+                  parameters=[_config(spec.package, spec.config_file), chosen.get(spec.name, {})], **common)
+             for spec in graph_nodes(domain, hardware=True)]
+    # The twin is a simulator on every robot: the same nodes as tabletop.launch.py starts for it.
+    twin = [Node(**arguments) for arguments in twin_launch_arguments(domain, common['namespace'],
+                                                                      chosen['lmp_node']['rehearse'], _config)]
+    return console + robot + twin
 
 
 def generate_launch_description() -> LaunchDescription:

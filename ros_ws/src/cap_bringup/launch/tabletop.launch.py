@@ -21,7 +21,7 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from cap_bringup.nodes import SIM_BRIDGE_NODE, graph_nodes
+from cap_bringup.nodes import SIM_BRIDGE_NODE, graph_nodes, twin_launch_arguments
 from cap_bringup.namespaces import normalise_namespace
 from cap_lmp_ros.domains.registry import get_domain
 
@@ -35,6 +35,8 @@ ARGUMENTS = (
                     'llama.cpp server and model of `make model`, started by lmp_node)'),
     ('domain', 'the domain whose prompts, robot API and scene run (cap_lmp_ros.domains)'),
     ('require_approval', 'true: each generated program waits for approval on /cap/approve (lmp_node)'),
+    ('rehearse', 'always or on_approval: rehearse each program on a twin (its nodes under <namespace>/twin) before '
+                 'the robot moves (lmp_node; empty: off)'),
     ('console', 'true: also the web console on 127.0.0.1 (port 8765)'),
 )
 
@@ -68,13 +70,17 @@ def _nodes(context):
         chosen['lmp_node']['domain'] = value['domain']
         chosen['sim_bridge']['scene'] = domain.scene  # the domain brings its scene, as in `cap up --domain`
     chosen['robot_state']['scene'] = domain.scene
+    if value['rehearse']:
+        chosen['lmp_node']['rehearse'] = value['rehearse']
     console = [Node(package='cap_bringup', executable='console', name='console', **common)] \
         if value['console'].lower() == 'true' else []
     # The simulator, the domain's perception and control nodes, lmp_node, visualization: `cap up`'s graph.
-    return console + [Node(package=spec.package, executable=spec.executable, name=spec.name,
-                           parameters=[_config(spec.package, spec.config_file), chosen.get(spec.name, {})]
-                           + ([] if spec is SIM_BRIDGE_NODE else [{'use_sim_time': True}]), **common)
-                      for spec in graph_nodes(domain)]
+    graph = [Node(package=spec.package, executable=spec.executable, name=spec.name,
+                  parameters=[_config(spec.package, spec.config_file), chosen.get(spec.name, {})]
+                  + ([] if spec is SIM_BRIDGE_NODE else [{'use_sim_time': True}]), **common)
+             for spec in graph_nodes(domain)]
+    twin = [Node(**arguments) for arguments in twin_launch_arguments(domain, namespace, value['rehearse'], _config)]
+    return console + graph + twin
 
 
 def generate_launch_description() -> LaunchDescription:

@@ -9,6 +9,7 @@ real robot" explains every field):
     domain: tabletop                    # which domain's prompts, robot API and detector run
     world_frame: base                   # the frame positions are given in (the arm's base frame, or map)
     require_approval: true              # every program waits for a person's yes before anything moves
+    rehearse: always                    # every program runs on a twin first (always, on_approval, off)
     arm: {controller_action, joint_states, joints, speed_scale}
     gripper: {action, open_position, closed_position, max_opening, max_effort}
     camera: {color, depth, camera_info, frame}
@@ -123,6 +124,7 @@ class HardwareProfile:
     calibration: Calibration
     navigation: NavigationProfile | None = None
     require_approval: bool = True
+    rehearse: str = 'always'  # lmp_node's rehearse on this robot (it checks the value)
     path: pathlib.Path | None = None  # the file it was read from
 
 
@@ -209,7 +211,8 @@ def load_profile(path: str | pathlib.Path) -> HardwareProfile:
         camera=_section(data, 'camera', CameraProfile, where),
         calibration=load_calibration(path.parent / data['calibration']),
         navigation=_section(data, 'navigation', NavigationProfile, where, required=False),
-        require_approval=bool(data.get('require_approval', True)), path=path)
+        require_approval=bool(data.get('require_approval', True)), rehearse=str(data.get('rehearse', 'always')),
+        path=path)
     return profile
 
 

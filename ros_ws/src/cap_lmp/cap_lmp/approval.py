@@ -128,18 +128,20 @@ def plain(value: Any, budget: PlanBudget | None = None, depth: int = 0) -> Any:
     raise PlanError(f'a robot action\'s argument of type {type(value).__name__} cannot be shown for approval')
 
 
-def recorders(names: Iterable[str], plan: list[PlannedCall]) -> dict[str, Callable[..., None]]:
+def recorders(names: Iterable[str], plan: list[PlannedCall],
+              calling: Mapping[str, Callable[..., Any]] | None = None) -> dict[str, Callable[..., Any]]:
     """Stand-ins for the functions `names` that append each call to `plan` (its arguments in full) and return
-    None."""
+    None; with `calling` (a rehearsal, cap_lmp.rehearsal), that then make the call and return what it returns."""
     budget = PlanBudget()
 
-    def recorder(name: str) -> Callable[..., None]:
-        def record(*args: Any, **kwargs: Any) -> None:
+    def recorder(name: str) -> Callable[..., Any]:
+        def record(*args: Any, **kwargs: Any) -> Any:
             if len(plan) >= MAX_PLANNED_CALLS:
                 raise RobotApiError(f'the program would make more than {MAX_PLANNED_CALLS} robot actions; it was '
                                     'not run')
             plan.append(PlannedCall(name, tuple(plain(arg, budget) for arg in args),
                                     {str(key): plain(item, budget) for key, item in kwargs.items()}))
+            return calling[name](*args, **kwargs) if calling is not None else None
         record.__name__ = name
         return record
 
@@ -163,21 +165,22 @@ def planned_call(values: Any, budget: PlanBudget | None = None) -> PlannedCall:
         raise ValueError(str(error)) from None
 
 
-def same_value(planned: Any, actual: Any) -> bool:
+def same_value(planned: Any, actual: Any, tolerance: float = MATCH_TOLERANCE) -> bool:
     """Whether a real call's argument (plain) is the planned one: texts, flags and shapes exactly, numbers within
-    MATCH_TOLERANCE."""
+    `tolerance`."""
     if planned is None or actual is None:
         return planned is actual
     if isinstance(planned, bool) or isinstance(actual, bool):
         return type(planned) is type(actual) and planned == actual
     if isinstance(planned, (int, float)) and isinstance(actual, (int, float)):
-        return abs(planned - actual) <= MATCH_TOLERANCE
+        return abs(planned - actual) <= tolerance
     if isinstance(planned, str) or isinstance(actual, str):
         return planned == actual
     if isinstance(planned, list) and isinstance(actual, list):
-        return len(planned) == len(actual) and all(same_value(p, a) for p, a in zip(planned, actual))
+        return len(planned) == len(actual) and all(same_value(p, a, tolerance) for p, a in zip(planned, actual))
     if isinstance(planned, dict) and isinstance(actual, dict):
-        return planned.keys() == actual.keys() and all(same_value(planned[k], actual[k]) for k in planned)
+        return planned.keys() == actual.keys() and all(same_value(planned[k], actual[k], tolerance)
+                                                       for k in planned)
     return False
 
 
@@ -234,12 +237,19 @@ class ApprovalGuard:
         self._plan: list[PlannedCall] = []
         self._next = 0
         self.violation = ''
+        self.tolerance = MATCH_TOLERANCE
+        self.held_to = 'the approved plan'  # what the run is held to, in refusals
+        self.unheld: frozenset[str] = frozenset()  # acting functions this command is not held to
 
-    def begin(self, required: bool) -> None:
-        """A new command: held to approval (`required`) or not."""
+    def begin(self, required: bool, tolerance: float = MATCH_TOLERANCE, held_to: str = 'the approved plan',
+              unheld: Iterable[str] = ()) -> None:
+        """A new command: held to approval (`required`) or not; numbers of a real call may differ from the plan's
+        by `tolerance` (a rehearsed plan was computed on a twin, whose objects end a little off the real ones);
+        the `unheld` functions go through as they come (left out of the plan too)."""
         with self._lock:
             self.phase = PLANNING if required else OFF
             self._plan, self._next, self.violation = [], 0, ''
+            self.tolerance, self.held_to, self.unheld = tolerance, held_to, frozenset(unheld)
 
     def may_ask(self) -> None:
         """Before a person is asked: NotApproved if the program already broke the rules or was approved once (a
@@ -257,14 +267,15 @@ class ApprovalGuard:
             if self.violation:
                 raise NotApproved(f'{self.violation}; nothing more ran', 'rejected')
             if self.phase == PLANNING:
-                self.phase, self._plan, self._next = APPROVED, list(plan), 0
+                self.phase, self._next = APPROVED, 0
+                self._plan = [call for call in plan if call.function not in self.unheld]
 
     def check_call(self, function: str, args: Sequence[Any], kwargs: Mapping[str, Any]) -> None:
         """Before a robot call goes through: UnapprovedAction if it must not."""
         if function not in self.acting:
             return
         with self._lock:
-            if self.phase == OFF:
+            if self.phase == OFF or function in self.unheld:
                 return
             if self.violation:
                 raise UnapprovedAction(self.violation)
@@ -277,11 +288,13 @@ class ApprovalGuard:
             if self.phase == PLANNING:
                 self._refuse(f'the program called {actual.text()} before it was approved')
             if self._next >= len(self._plan):
-                self._refuse(f'the program called {actual.text()} after the {len(self._plan)} approved action(s)')
+                self._refuse(f'the program called {actual.text()} after the {len(self._plan)} action(s) of '
+                             f'{self.held_to}')
             expected = self._plan[self._next]
-            if not (expected.function == actual.function and same_value(list(expected.args), list(actual.args))
-                    and same_value(dict(expected.kwargs), dict(actual.kwargs))):
-                self._refuse(f'the program called {actual.text()} where the approved plan\'s action '
+            if not (expected.function == actual.function
+                    and same_value(list(expected.args), list(actual.args), self.tolerance)
+                    and same_value(dict(expected.kwargs), dict(actual.kwargs), self.tolerance)):
+                self._refuse(f'the program called {actual.text()} where {self.held_to}\'s action '
                              f'{self._next + 1} is {expected.text()}')
             self._next += 1
 

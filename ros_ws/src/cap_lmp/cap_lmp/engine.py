@@ -261,6 +261,9 @@ class Engine:
         # The functions that act on the world (move the robot, speak): a plan-only run records their calls.
         self.plan_functions = tuple(name for name in plan_functions if name in self.api)
         self.approval: ApprovalGate | None = None  # set: every command waits for it after a plan-only run
+        # With approval set: the plan run is a rehearsal on a twin (cap_lmp.rehearsal): the acting calls are made
+        # too (the node routes them to the twin), not only recorded.
+        self.rehearse = False
         self._kept_answers: dict[tuple[Any, ...], PreparedCode] | None = None  # nested LMPs' code of a planned command
         self._approved_run = False  # the approved program runs: no new code may be asked for
         self._listeners: list[Callable[[EngineEvent], None]] = []
@@ -602,7 +605,12 @@ class Engine:
             except Exception as error:  # everything a generated program can cause ends here, reported
                 self._report_failure(result, error)
                 result.message += self._feedback_note
-                if planning and not isinstance(error, NotApproved):
+                if planning and self.rehearse and result.outcome is not Outcome.CANCELLED:
+                    result.outcome = Outcome.REFUSED  # what the twin saw is the reason nothing moved
+                    if not isinstance(error, NotApproved):
+                        result.message = (f'the rehearsal on the twin failed, so the robot did not move: '
+                                          f'{result.message}')
+                elif planning and not isinstance(error, NotApproved):
                     result.message = f'the plan-only run failed, so nothing moved: {result.message}'
                 del error  # its traceback holds the program's frames and their memory
             finally:
@@ -693,7 +701,7 @@ class Engine:
         kept = self.scope, self.histories, self.functions
         scope = session_copy(self.scope, self._fixed_names.values())
         scope.update(self._fixed_names)
-        scope.update(recorders(self.plan_functions, plan))
+        scope.update(recorders(self.plan_functions, plan, self.api if self.rehearse else None))
         self.scope = scope
         self.histories = {name: list(history) for name, history in self.histories.items()}
         self.functions = dict(self.functions)

@@ -335,6 +335,7 @@ def serve(connection: Connection, control: Connection) -> None:
             channel.call_seconds.clear()
             lmp, context = message.get('lmp'), message.get('context')
             engine.approval = gate if message.get('approval') is True else None
+            engine.rehearse = engine.approval is not None and message.get('rehearse') is True
             command = str(message.get('command', ''))
             if lmp is not None and (not isinstance(lmp, str) or lmp not in engine.lmps):
                 outcome = CommandResult(command=command, command_id=0, success=False,

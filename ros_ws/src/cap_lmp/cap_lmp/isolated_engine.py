@@ -312,6 +312,7 @@ class IsolatedEngine:
         self.default_lmp = ''
         self.restarts = 0
         self.approval: ApprovalGate | None = None  # set: each command is planned and waits for it (approval.py)
+        self.rehearse = False  # with approval: the plan run makes its acting calls (on a twin, cap_lmp.rehearsal)
         # Called (on a timer's thread) when the program's time limit passes while a robot call of it runs: it stops
         # the robot, which ends the call, so that the time limit bounds motions too.
         self.on_deadline = on_deadline
@@ -554,7 +555,7 @@ class IsolatedEngine:
         run_lmp = lmp or self.default_lmp
         try:
             self._send({'op': 'run', 'command': command, 'run': self._run_id, 'lmp': lmp, 'context': context,
-                        'approval': self.approval is not None})
+                        'approval': self.approval is not None, 'rehearse': self.rehearse})
             last_heard = clock.started
             while True:
                 message = self._receive(0.05)

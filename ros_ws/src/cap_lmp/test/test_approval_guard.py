@@ -89,7 +89,7 @@ def test_a_call_beyond_the_plan_or_elsewhere_is_refused(rig):
     guard.begin(True)
     guard.approve([PlannedCall('put_first_on_second', ('red block', 'red bowl'))])
     api['put_first_on_second']('red block', 'red bowl')
-    with pytest.raises(UnapprovedAction, match='after the 1 approved action'):
+    with pytest.raises(UnapprovedAction, match=r'after the 1 action\(s\) of the approved plan'):
         api['put_first_on_second']('blue block', 'blue bowl')
     guard.begin(True)
     guard.approve([PlannedCall('put_first_on_second', ('red block', [0.0, -0.5]))])

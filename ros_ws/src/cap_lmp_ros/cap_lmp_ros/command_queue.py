@@ -50,6 +50,9 @@ class Job:
     awaiting_approval: bool = False  # its code waits for a person's approval (lmp_node's require_approval)
     decided: threading.Event = field(default_factory=threading.Event)  # set with `decision`
     decision: tuple[bool, str] = (False, '')  # (approved, the reason given)
+    verdict: Any = None  # its rehearsal on the twin (cap_lmp.rehearsal.TwinVerdict), when it was rehearsed
+    prediction: str = ''  # after a rehearsed run: the world against the twin's prediction, in words
+    prediction_misses: list = field(default_factory=list)  # cap_lmp.rehearsal.PredictionMiss
 
 
 class CommandQueue:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from cap_control.kinematics import JOINT_NAMES
 from cap_ros_common.parameters import parameter
 
 
@@ -62,6 +63,15 @@ class LmpNodeConfig:
                                        '(STAGE_AWAITING_APPROVAL); approve or reject it with /cap/approve.')
     approval_timeout_s: float = parameter(300.0, 'With require_approval: a program not approved within this time '
                                           'is dropped (refused) [s].')
+
+    rehearse: str = parameter('off', 'Rehearse each program on a twin before the robot moves (cap_lmp.rehearsal): '
+                              'always, on_approval (with require_approval only) or off. The graph starts the twin '
+                              '(its simulator, perception and control nodes under the namespace twin) when this is '
+                              'not off; hardware mode defaults to always.')
+    twin_joint_states_topic: str = parameter('joint_states', 'With rehearse: the real arm\'s joint states, where the '
+                                             'twin starts its arm.')
+    twin_arm_joints: tuple[str, ...] = parameter(JOINT_NAMES, 'With rehearse: the real arm\'s joint names in the '
+                                                 "twin's order (shoulder pan to wrist 3).")
 
 
 # Parameters whose change at run time takes effect from the next command; any other change is rejected.

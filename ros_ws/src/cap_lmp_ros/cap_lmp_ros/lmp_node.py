@@ -48,18 +48,21 @@ from std_msgs.msg import Empty, String
 from std_srvs.srv import Trigger
 
 from cap_interfaces.action import ExecuteCommand
-from cap_interfaces.msg import GraphNames, PlannedMotion, StatusEvent
+from cap_interfaces.msg import GraphNames, PlannedMotion, PredictionMiss, StatusEvent
 from cap_interfaces.srv import ApproveCommand
 from cap_lmp import engine as engine_module
 from cap_lmp.approval import ApprovalGuard, GuardedClient, PlannedCall, guarded_functions
 from cap_lmp.cassette import make_client
 from cap_lmp.engine_protocol import CommandEngine
 from cap_lmp.isolated_engine import JAIL_MODES, IsolatedEngine
-from cap_lmp.errors import ExecutionStopped, LLMError, NotApproved
+from cap_lmp.errors import ExecutionStopped, LLMError, NotApproved, RobotApiError
+from cap_lmp.engine import CommandResult
 from cap_lmp.llm import NO_MODEL_CONFIGURED
 from cap_lmp.local_model import INSTALL_HINT
 from cap_lmp.local_server import LocalModelClient, LocalModelServer, ServerSettings, server_binary, warm_up
 from cap_lmp.outcome import Outcome
+from cap_lmp.rehearsal import (REHEARSAL_TOLERANCE, REHEARSE_MODES, UNHELD_WHEN_REHEARSED, Rehearsal, TwinVerdict,
+                                prediction_misses, prediction_text, rehearses)
 from cap_lmp.safe_text import terminal_text, wire_text
 from cap_lmp.sandbox import IN_PROCESS_WARNING, SandboxLimits
 from cap_lmp.wire import MAX_CODE_CHARS
@@ -68,6 +71,7 @@ from cap_lmp_ros.config import RUNTIME_PARAMETERS, LmpNodeConfig
 from cap_lmp_ros.domains.registry import engine_api, get_domain, prompt_heads
 from cap_lmp_ros.plan_steps import PlanStep, plan_summary
 from cap_lmp_ros.thread_watch import FATAL_EXIT_CODE, ThreadWatch
+from cap_lmp_ros.twin import Twin
 from cap_ros_common.actions import RESULT_TIMEOUT_S
 from cap_ros_common.parameters import declare_config, parameter_names
 
@@ -158,6 +162,22 @@ class LmpNode(Node):
         self.approval_guard = ApprovalGuard(self.domain.plan_functions)
         api = guarded_functions(engine_api(self.domain, self.robot.functions()), self.approval_guard,
                                 self._stop_unapproved)
+        # Rehearsal: while a command is rehearsed, its robot calls go to the twin, also on this side.
+        if config.rehearse not in REHEARSE_MODES:
+            raise ValueError(f'parameter rehearse={config.rehearse!r} is not one of {", ".join(REHEARSE_MODES)}')
+        if config.rehearse != 'off' and self.domain.function_arguments:
+            raise ValueError(f'domain {self.domain.name!r} cannot be rehearsed on a twin (its robot functions run '
+                             'functions of the program); set rehearse to off')
+        self.rehearse_mode = config.rehearse
+        self.rehearsal = Rehearsal(self.domain.plan_functions)
+        self.twin: Twin | None = None
+        if config.rehearse != 'off':
+            def twin_binding(node: Node, say: Any) -> Any:
+                return self.domain.robot_api(node, say, config.service_timeout_s, config.motion_timeout_s)
+            self.twin = Twin(self, self.robot, twin_binding, config.twin_joint_states_topic, config.twin_arm_joints,
+                             config.service_timeout_s)
+            api = self.rehearsal.routed(api, engine_api(self.domain, self.twin.binding.functions()),
+                                        self.twin.check_harm)
         limits = SandboxLimits(time_limit_s=config.time_limit_s)
         engine_options = {'regenerations': config.regenerations, 'plan_functions': list(self.domain.plan_functions),
                           'feedback_rounds': config.feedback_rounds}
@@ -362,6 +382,12 @@ class LmpNode(Node):
             result.completion_tokens = int(job.result.completion_tokens)
             result.model_seconds = float(job.result.timings.get('model_s', 0.0))
             result.total_seconds = float(job.result.timings.get('total_s', 0.0))
+            result.rehearsed = job.verdict is not None
+            if job.verdict is not None:
+                result.twin_build_seconds = float(job.verdict.build_s)
+                result.rehearsal_seconds = float(max(job.verdict.rehearse_s, 0.0))
+            result.prediction = wire_text(job.prediction)
+            result.prediction_misses = [_prediction_miss(miss) for miss in job.prediction_misses]
         else:
             result.message = job.refusal or {Outcome.CANCELLED: 'cancelled before it ran',
                                              Outcome.ERROR: 'failed outside the program (see /cap/status)'}.get(
@@ -385,15 +411,29 @@ class LmpNode(Node):
             begin_command = getattr(self.robot, 'begin_command', None)  # optional (see RobotBinding)
             if begin_command is not None:
                 begin_command()
-            self.engine.approval = self._await_approval if self.require_approval else None
-            self.approval_guard.begin(self.require_approval)
+            rehearse = self.twin is not None and rehearses(self.rehearse_mode, self.require_approval)
+            self.engine.approval = self._gate if self.require_approval or rehearse else None
+            self.engine.rehearse = rehearse
+            if rehearse:
+                self.approval_guard.begin(True, REHEARSAL_TOLERANCE, 'the rehearsed plan',
+                                          () if self.require_approval else UNHELD_WHEN_REHEARSED)
+            else:
+                self.approval_guard.begin(self.require_approval)
             try:
                 if not self._wait_for_model(job):
                     job.outcome = Outcome.CANCELLED
                     self._publish_status(job, StatusEvent.STAGE_CANCELLED, message=(
                         job.stop_reason or 'cancelled') + ' while it waited for the local model')
                     continue
+                if rehearse and not self._begin_rehearsal(job):
+                    job.outcome = self._outcome(job)
+                    continue
                 job.result = self.engine.run(job.command)
+                self.rehearsal.end()
+                if job.verdict is not None and job.verdict.rehearse_s < 0:  # it ended on the twin
+                    job.verdict.rehearse_s += time.monotonic()
+                if job.verdict is not None and job.result.outcome is Outcome.DONE:
+                    self._compare_prediction(job)
                 job.outcome = self._outcome(job)
             except Exception as error:  # the engine reports program errors itself; this is a last resort
                 if self._closing:
@@ -403,6 +443,7 @@ class LmpNode(Node):
                 self._log_error(f'{job.command_id} failed outside the program: {text}')
                 self._publish_status(job, StatusEvent.STAGE_ERROR, message=text)
             finally:
+                self.rehearsal.end()
                 self._current = None
                 self.queue.finish(job)
 
@@ -440,19 +481,79 @@ class LmpNode(Node):
             self._publish_status(job, _STAGES[event.stage], code=event.code if top_level else '', message=message)
 
     def _publish_status(self, job: Job, stage: int, code: str = '', message: str = '',
-                        plan: list[PlannedMotion] | None = None) -> None:
+                        plan: list[PlannedMotion] | None = None, twin_image: bytes = b'') -> None:
         if self._closing:
             return
         status = StatusEvent(command_id=job.command_id, command=wire_text(job.command), stage=stage,
                              code=wire_text(code, MAX_CODE_CHARS), message=wire_text(message), plan=plan or [])
+        if twin_image:
+            status.twin_image.format = 'png'
+            status.twin_image.data = twin_image
         status.header.stamp = self.get_clock().now().to_msg()
         self._status_publisher.publish(status)
         goal_handle = job.goal_handle
         if goal_handle is not None:
             goal_handle.publish_feedback(ExecuteCommand.Feedback(status=status))
 
+    # -------------------------------------------------------------------------------------------- rehearsal
+    def _begin_rehearsal(self, job: Job) -> bool:
+        """Build the twin from the world as perceived and route the program's calls to it. False when the twin
+        could not be built: the command is then refused (job.result says why) and nothing moved."""
+        assert self.twin is not None
+        self._publish_status(job, StatusEvent.STAGE_RECEIVED, message='building the twin from the scene as '
+                                                                      'perceived, to rehearse the program on it')
+        started = time.monotonic()
+        self.twin.stop_requested.clear()
+        try:
+            start = self.twin.build()
+        except RobotApiError as error:
+            job.result = CommandResult(command=job.command, command_id=0, success=False,
+                                       outcome=Outcome.REFUSED,
+                                       message=f'the twin could not be built, so the program did not run: {error}')
+            return False
+        job.verdict = TwinVerdict(start=start, build_s=time.monotonic() - started)
+        job.verdict.rehearse_s = -time.monotonic()  # counted from here; completed by the gate
+        self.rehearsal.begin()
+        return True
+
+    def _gate(self, code: str, calls: list[PlannedCall]) -> None:
+        """The engine's gate after its plan run (on the worker thread): a rehearsal's verdict first, then a
+        person's approval if required. NotApproved stops the command before the robot moves."""
+        job = self._current
+        verdict = job.verdict if job is not None else None
+        if verdict is not None:
+            assert self.twin is not None
+            verdict.calls = self.rehearsal.end()  # what the twin received, not what the program says it planned
+            verdict.rehearse_s += time.monotonic()
+            try:
+                self.twin.verdict(verdict)
+            except RobotApiError as error:
+                raise NotApproved(f'the rehearsal could not be judged ({error}); the robot did not move',
+                                  'rehearsal') from None
+            if verdict.findings:
+                raise NotApproved(f'on the twin: {"; ".join(verdict.findings)}; the robot did not move', 'rehearsal')
+            calls = verdict.calls
+            self._publish_status(job, StatusEvent.STAGE_CODE, code=code, message=verdict.summary())
+        if self.require_approval:
+            self._await_approval(code, calls, verdict)
+        else:
+            self.approval_guard.approve(calls)  # from now on the program may make exactly these calls
+
+    def _compare_prediction(self, job: Job) -> None:
+        """After a rehearsed program ran: where the world differs from the twin's prediction."""
+        assert self.twin is not None and job.verdict is not None
+        verdict = job.verdict
+        try:
+            observed = self.twin.observe()
+        except RobotApiError as error:
+            job.prediction = f'the twin\'s prediction could not be compared: {error}'
+            return
+        job.prediction_misses = prediction_misses(verdict.start, verdict.predicted, observed)
+        job.prediction = prediction_text(job.prediction_misses, len(set(observed) & set(verdict.predicted)))
+        job.result.message = f'{job.result.message or "done"}; {job.prediction}'
+
     # -------------------------------------------------------------------------------------------- approval
-    def _await_approval(self, code: str, calls: list[PlannedCall]) -> None:
+    def _await_approval(self, code: str, calls: list[PlannedCall], verdict: TwinVerdict | None = None) -> None:
         """The engine's approval gate (on the worker thread): show the code and its plan, wait for /cap/approve.
 
         Returns when approved; raises NotApproved when rejected or not approved within approval_timeout_s, and
@@ -467,9 +568,11 @@ class LmpNode(Node):
         job.decided.clear()
         job.awaiting_approval = True
         try:
+            rehearsed = f'; {verdict.summary()}' if verdict is not None else ''
             self._publish_status(job, StatusEvent.STAGE_AWAITING_APPROVAL, code=code, plan=[
                 _planned_motion(step) for step in steps], message=(
-                    f'waiting for approval on {service} (within {timeout_s:g} s): {plan_summary(steps)}'))
+                    f'waiting for approval on {service} (within {timeout_s:g} s): {plan_summary(steps)}{rehearsed}'),
+                twin_image=verdict.image_png if verdict is not None else b'')
             deadline = time.monotonic() + timeout_s
             while not job.decided.wait(0.05):
                 if job.cancel_requested or self._closing:
@@ -529,6 +632,8 @@ class LmpNode(Node):
     def _stop_running(self) -> None:
         self.engine.cancel()
         self.robot.stop()
+        if self.twin is not None:
+            self.twin.stop()
 
     def stop(self, reason: str) -> None:
         """End the running command and its motion; drop waiting commands."""
@@ -561,6 +666,8 @@ class LmpNode(Node):
         self.engine.close()
         if self.model_server is not None:
             self.model_server.stop()
+        if self.twin is not None:
+            self.twin.destroy()
         super().destroy_node()
 
 
@@ -568,6 +675,13 @@ def _planned_motion(step: PlanStep) -> PlannedMotion:
     return PlannedMotion(function=wire_text(step.function, 100), object_name=wire_text(step.object_name, 200),
                          target_name=wire_text(step.target_name, 200), description=wire_text(step.description, 500),
                          points=[Point(x=x, y=y, z=z) for x, y, z in step.points[:100]])
+
+
+def _prediction_miss(miss) -> PredictionMiss:
+    return PredictionMiss(name=wire_text(miss.name, 200), predicted=Point(x=miss.predicted[0], y=miss.predicted[1],
+                                                                          z=miss.predicted[2]),
+                          observed=Point(x=miss.observed[0], y=miss.observed[1], z=miss.observed[2]),
+                          distance=float(miss.distance), unexpected=bool(miss.unexpected))
 
 
 def main(args=None) -> None:
@@ -585,6 +699,8 @@ def main(args=None) -> None:
     watch.log = node._log_fatal
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
+    if node.twin is not None:
+        executor.add_node(node.twin.node)
     died = Future()
     watch.add_callback(lambda _line: died.set_result(True))
     status = 0

@@ -20,8 +20,10 @@ ARM_MOUNT: tuple[float, float, float] = (0.1, 0.0, BASE_HEIGHT)  # the UR5e's ba
 STOWED_JOINTS: tuple[float, ...] = (math.pi, -2.4, 2.8, -0.5, -math.pi / 2, 0.0)
 
 # Where the tool carries a held object while the base drives (the arm's frame: x ahead, z up from the arm's base):
-# over the base, inside its footprint, the object hanging above the base's top.
-CARRY_TCP: tuple[float, float, float] = (0.15, 0.0, 0.45)
+# over the base, inside its footprint, the object hanging above the base's top. High enough that no part of the arm
+# below a countertop's height (0.93 m) reaches past the base's edge: lower (0.45 m), the upper arm stuck out 8 cm
+# there, and the base turning away from the counter swept it into the edge (a rehearsal on the twin saw it).
+CARRY_TCP: tuple[float, float, float] = (0.2, 0.0, 0.6)
 
 # The head camera: where it is on the base and how far it looks down.
 HEAD_CAMERA = 'head'

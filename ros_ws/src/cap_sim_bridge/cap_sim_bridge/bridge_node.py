@@ -54,7 +54,7 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 
 from control_msgs.action import FollowJointTrajectory, GripperCommand
 from cap_interfaces.msg import GraphNames, ObjectArray
-from cap_interfaces.srv import ControlStep, GetInk, PushTool, ResetScene
+from cap_interfaces.srv import ControlStep, GetInk, GetTwinReport, PushTool, ResetScene
 from cap_ros_common.actions import RESULT_TIMEOUT_S
 from cap_ros_common.parameters import declare_config
 from cap_ros_common.qos import LATCHED_QOS
@@ -71,6 +71,7 @@ from cap_sim_bridge.mobile_base import BASE_JOINT_NAMES
 from cap_sim_bridge.standin import LINK_TO_OPTICAL, Perturbation, standin_adjustment
 from cap_sim_bridge.urdf import BASE_LINK
 from cap_hardware.profile import load_profile
+from cap_sim_bridge.twin_watch import TwinWatch
 from cap_sim_bridge.world import ARM_JOINT_NAMES, GRIPPER_JOINT_NAMES, World
 
 STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -87,6 +88,8 @@ POLL_PERIOD = 0.005  # [s] wall time between checks of a running action
 # real time's 100 Hz through despite the loop's jitter (at most 133 messages a wall second).
 MIN_WALL_STATE_INTERVAL = 0.0075  # [s] between two /clock (and /joint_states) messages
 MAX_WALL_OBJECTS_RATE = 50.0  # [Hz] ground-truth objects
+PICTURE_SIZE = (320, 240)  # the twin's picture [pixels]: enough to see what moved, small on /cap/status
+REST_SPEED = 0.01  # [m/s or rad/s] the twin's world counts as at rest below this
 FEEDBACK_PERIOD = 0.05  # [s] wall time between feedback messages
 
 
@@ -163,6 +166,12 @@ class SimBridgeNode(Node):
         callbacks = ReentrantCallbackGroup()
         if not self.profile:  # a real robot has no reset of its world
             self.create_service(ResetScene, GraphNames.SIM_RESET_SERVICE, self._on_reset, callback_group=callbacks)
+        # A twin watches each rehearsal for harm (twin_watch.py) and reports it.
+        self.twin_watch = TwinWatch(self.world) if config.twin and not self.profile else None
+        if self.twin_watch is not None:
+            self.twin_watch.start()
+            self.create_service(GetTwinReport, GraphNames.SIM_TWIN_REPORT_SERVICE, self._on_twin_report,
+                                callback_group=callbacks)
         self._ink_pub = None
         if self.world.ink_canvas is not None and not self.profile:
             self._ink_pub = self.create_publisher(Image, GraphNames.SIM_INK_TOPIC, LATCHED_QOS)
@@ -257,6 +266,8 @@ class SimBridgeNode(Node):
                 objects_rate = config.idle_objects_rate if idle else self._objects_rate
                 with world.lock:
                     world.step(steps)
+                    if self.twin_watch is not None:
+                        self.twin_watch.update()
                     now = world.time
                     joints = self._joint_states(now) if publish_state else None
                     base = self._base_transform(now) if world.base is not None else None
@@ -477,11 +488,17 @@ class SimBridgeNode(Node):
         return response
 
     # --------------------------------------------------------------------------------------------- reset
-    def reset_world(self, seed: int, specs=None) -> list:
-        """Reset the world (objects: specs, or the seed's episode) and tell the graph; the states settled. A stand-in
-        is reset this way by the test that plays the world around the robot (it offers no reset service)."""
+    def reset_world(self, seed: int, specs=None, arm_joints=None, base_pose=None, exactly: bool = False) -> list:
+        """Reset the world (objects: specs, or when there are none the seed's episode, unless `exactly`; the arm at
+        `arm_joints` and a mobile base at `base_pose`, else where the scene starts them) and tell the graph; the
+        states settled. A stand-in is reset this way by the test that plays the world around the robot (it offers no
+        reset service)."""
         self.lockstep.release()  # a reset ends a controller's hold on the world
-        states = self.world.reset(seed, specs or None)
+        with self.world.lock:  # the physics loop's watch sees the new scene only once it watches it
+            states = self.world.reset(seed, specs if specs or exactly else None, arm_joints=arm_joints,
+                                      base_pose=base_pose)
+            if self.twin_watch is not None:
+                self.twin_watch.start()
         self._scene_reset.set()
         self._woken.set()
         self._publish_scene()
@@ -492,7 +509,9 @@ class SimBridgeNode(Node):
             if request.scene and request.scene != self.world.scene_name:
                 raise ValueError(f'unknown scene {request.scene!r}; this bridge simulates '
                                  f'"{self.world.scene_name}"')
-            states = self.reset_world(request.seed, [conv.object_spec(o) for o in request.objects])
+            states = self.reset_world(request.seed, [conv.object_spec(o) for o in request.objects],
+                                      arm_joints=list(request.arm_joint_positions) or None,
+                                      base_pose=list(request.base_pose) or None, exactly=request.exactly)
         except ValueError as error:
             response.success = False
             response.message = str(error)
@@ -501,6 +520,36 @@ class SimBridgeNode(Node):
         response.message = f'scene "{self.world.scene_name}" seed {request.seed}: ' + \
             ', '.join(s.name for s in states)
         response.objects = [conv.object_state_msg(s) for s in states]
+        return response
+
+    def _on_twin_report(self, request: GetTwinReport.Request,
+                        response: GetTwinReport.Response) -> GetTwinReport.Response:
+        """What the twin saw since its reset; with settle_s, once the objects came to rest (or that much simulated
+        time passed)."""
+        world, watch = self.world, self.twin_watch
+        settle_s = min(max(float(request.settle_s), 0.0), 10.0) if math.isfinite(request.settle_s) else 0.0
+        with world.lock:
+            until = world.time + settle_s
+        self._woken.set()  # no idling while it settles
+        wall_deadline = time.monotonic() + 10.0
+        while settle_s > 0 and time.monotonic() < wall_deadline:
+            with world.lock:
+                if world.time >= until or (world.max_speed() < REST_SPEED and world.trajectory_end_time is None):
+                    break
+            time.sleep(POLL_PERIOD)
+        watch.finish()
+        with world.lock:
+            response.findings = watch.findings()
+            response.objects = [conv.object_state_msg(s) for s in world.object_states()]
+            response.simulated_s = world.time - watch.started_at
+            now = world.time
+        if request.picture:
+            cameras = self.world.scene.camera_names or self.world.camera_names
+            rgb, _ = world.render(cameras[0], PICTURE_SIZE[0], PICTURE_SIZE[1], with_depth=False)
+            response.image = conv.png_image_msg(now, cameras[0], rgb)
+        response.success = True
+        response.message = (f'{len(response.findings)} finding(s) in {response.simulated_s:.1f} s of simulated time; '
+                            f'the gripper pressed on the fixed scene with at most {watch.max_gripper_force:.1f} N')
         return response
 
     # ------------------------------------------------------------------------------------------- goals

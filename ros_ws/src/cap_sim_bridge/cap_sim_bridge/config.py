@@ -72,6 +72,8 @@ class SimBridgeConfig:
                                           'controller is not running, for the preflight).')
     ink_rate: float = parameter(5.0, 'In a scene with a whiteboard: most ink images a second of simulated time, '
                                      'sent only when the ink changed [Hz].')
+    twin: bool = parameter(False, 'Run as the twin that rehearses programs (cap_sim_bridge.twin_watch): watch for harm '
+                                  'after every reset and report it on the twin report service.')
     lockstep_timeout: float = parameter(5.0, 'A controller stepping a plant (ControlStep) that sends no request for '
                                              'this long [s of wall time] loses it: the plant is made safe and the '
                                              'simulation runs freely again.')

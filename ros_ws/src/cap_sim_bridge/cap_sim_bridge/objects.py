@@ -39,12 +39,16 @@ _OBJECT_CONAFFINITY = 3
 
 @dataclasses.dataclass(frozen=True)
 class ObjectSpec:
-    """One object to place on reset. position: (x, y) on the table [m]; None = sampled from the seed."""
+    """One object to place on reset. position: (x, y) on the table [m]; None = sampled from the seed. height: the
+    centre's height [m] where it is known (a twin of a perceived scene: a block standing on another), else None (it
+    rests on the scene's surface); yaw: its rotation about the vertical [rad]."""
 
     name: str
     category: str
     color_name: str
     position: tuple[float, float] | None = None
+    height: float | None = None
+    yaw: float = 0.0
 
     @classmethod
     def from_name(cls, name: str, position: tuple[float, float] | None = None) -> 'ObjectSpec':

@@ -1,12 +1,15 @@
 """Conversions between the world's plain data and ROS messages (message types only, no rclpy)."""
 from __future__ import annotations
 
+import math
+
 from typing import Sequence
 
+import cv2  # opencv-python-headless, pinned: the PNG encoder the ink image uses too
 import numpy as np
 from geometry_msgs.msg import Point, PoseStamped, Quaternion
 from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import CameraInfo, Image, JointState
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 from std_msgs.msg import ColorRGBA, Header
 
 from cap_interfaces.msg import ObjectSpec as ObjectSpecMsg
@@ -49,7 +52,9 @@ def object_spec(msg: ObjectSpecMsg) -> ObjectSpec:
     from_name = ObjectSpec.from_name(name)
     return ObjectSpec(name=name, category=msg.category or from_name.category,
                       color_name=msg.color_name or from_name.color_name,
-                      position=(msg.position.x, msg.position.y) if msg.use_position else None)
+                      position=(msg.position.x, msg.position.y) if msg.use_position else None,
+                      height=msg.position.z if msg.use_position and msg.use_height else None,
+                      yaw=msg.yaw if msg.use_position and math.isfinite(msg.yaw) else 0.0)
 
 
 def joint_state_msg(seconds: float, names: Sequence[str], positions: np.ndarray, velocities: np.ndarray,
@@ -62,6 +67,14 @@ def color_image_msg(seconds: float, camera: str, rgb: np.ndarray) -> Image:
     height, width, _ = rgb.shape
     return Image(header=header(seconds, optical_frame_id(camera)), height=height, width=width, encoding='rgb8',
                  is_bigendian=0, step=width * 3, data=np.ascontiguousarray(rgb).tobytes())
+
+
+def png_image_msg(seconds: float, camera: str, rgb: np.ndarray) -> CompressedImage:
+    """An RGB picture as a PNG (the twin's view on /cap/status: small, lossless)."""
+    ok, encoded = cv2.imencode('.png', np.ascontiguousarray(rgb[..., ::-1]))
+    if not ok:
+        raise RuntimeError('could not encode the picture as PNG')
+    return CompressedImage(header=header(seconds, optical_frame_id(camera)), format='png', data=encoded.tobytes())
 
 
 def depth_image_msg(seconds: float, camera: str, depth: np.ndarray) -> Image:

@@ -121,15 +121,17 @@ class World:
 
     # ----------------------------------------------------------------------------------------------- reset
     def reset(self, seed: int, objects: Sequence[ObjectSpec | str] | None = None,
-              settle_time: float = DEFAULT_SETTLE_TIME) -> list[ObjectState]:
+              settle_time: float = DEFAULT_SETTLE_TIME, arm_joints: Sequence[float] | None = None,
+              base_pose: Sequence[float] | None = None) -> list[ObjectState]:
         """Place the objects (default: the scene's episode for this seed) and let them settle.
 
-        objects: ObjectSpec or names like "red block"; specs without a position get one sampled from the seed
-        under the spawn rules. The arm goes to the scene's home joints (HOME_JOINT_POSITIONS in the table top) with
-        the gripper open, a mobile base to the scene's start pose. Returns the settled
-        object states. Raises ValueError for unknown colours or categories, duplicate names, or impossible layouts.
+        objects: ObjectSpec or names like "red block" (an empty list: none); specs without a position get one
+        sampled from the seed under the spawn rules. The arm goes to the scene's home joints (HOME_JOINT_POSITIONS
+        in the table top), or to `arm_joints`, with the gripper open, a mobile base to the scene's start pose or to
+        `base_pose` (x, y, yaw). Returns the settled object states. Raises ValueError for unknown colours or
+        categories, duplicate names, impossible layouts, or joints outside their limits.
         """
-        specs = [ObjectSpec.from_name(o) if isinstance(o, str) else o for o in objects] if objects else \
+        specs = [ObjectSpec.from_name(o) if isinstance(o, str) else o for o in objects] if objects is not None else \
             self.scene.default_objects(seed)
         for spec in specs:
             spec.validate()
@@ -162,17 +164,26 @@ class World:
             self.objects = specs
             self.seed = seed
             self._place_robot_at_home()
+            if arm_joints is not None and len(arm_joints):
+                self._place_arm(arm_joints)
             if self._ink is not None:
                 self._ink.reset()
             for spec, position in zip(specs, positions):
                 x, y = position[:2]
                 surface = position[2] if len(position) > 2 else self.scene.surface_z
                 adr = self._object_qpos_adr[spec.name]
-                z = surface + scene_objects.resting_height(spec.category) + scene_objects.SPAWN_CLEARANCE
-                self.data.qpos[adr:adr + 7] = [x, y, z, 1.0, 0.0, 0.0, 0.0]
+                resting = surface + scene_objects.resting_height(spec.category)
+                # A given height never puts an object below its surface (perception's centre is a few mm off).
+                z = max(resting, spec.height if spec.height is not None else resting) + scene_objects.SPAWN_CLEARANCE
+                half = spec.yaw / 2
+                self.data.qpos[adr:adr + 7] = [x, y, z, math.cos(half), 0.0, 0.0, math.sin(half)]
             if self.scene.initialize is not None:  # the scene's own seeded start (e.g. a cart-pole's lean)
                 self.scene.initialize(self.model, self.data, seed)
             if self.base is not None:
+                if base_pose is not None and len(base_pose):
+                    if len(base_pose) != 3:
+                        raise ValueError(f'a base pose is (x, y, yaw), not {len(base_pose)} numbers')
+                    self.base.set_positions(self.data, [float(v) for v in base_pose])
                 self.base.hold_here(self.data)
             self.data.time = previous_time
             mujoco.mj_forward(self.model, self.data)
@@ -243,6 +254,18 @@ class World:
         self._set_gripper_force(GRIPPER_DEFAULT_FORCE)
         data.ctrl[self._arm_actuator_ids] = home
         data.ctrl[self._gripper_actuator_id] = opening
+
+    def _place_arm(self, joints: Sequence[float]) -> None:
+        """Put the arm at `joints` (held there): a twin starts where the real arm is."""
+        positions = np.array([float(v) for v in joints])
+        if positions.shape != (len(ARM_JOINT_NAMES),) or not np.all(np.isfinite(positions)):
+            raise ValueError(f'the arm has {len(ARM_JOINT_NAMES)} joints; got {list(joints)[:10]}')
+        low, high = self.arm_joint_limits[:, 0], self.arm_joint_limits[:, 1]
+        if np.any(positions < low - 1e-6) or np.any(positions > high + 1e-6):
+            raise ValueError(f'arm joints {np.round(positions, 3).tolist()} are outside their limits')
+        self.data.qpos[self._arm_qpos_adr] = positions
+        self._hold_positions = positions.copy()
+        self.data.ctrl[self._arm_actuator_ids] = positions
 
     # -------------------------------------------------------------------------------------------- stepping
     @property

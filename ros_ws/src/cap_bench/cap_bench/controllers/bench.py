@@ -274,6 +274,9 @@ class ControllersBench(GraphBench):
 
     def options(self, args: argparse.Namespace) -> BenchOptions:
         self.episodes(args)
+        if args.rehearse != 'off':
+            raise ValueError('controllers run functions of the program at a fixed rate: they are not rehearsed on a '
+                             'twin (--rehearse off)')
         return super().options(args)
 
     def run(self, options: BenchOptions, args: argparse.Namespace) -> dict:

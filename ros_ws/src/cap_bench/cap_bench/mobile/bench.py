@@ -29,7 +29,7 @@ from cap_bench import episode_runs, template_report
 from cap_bench.bench_options import BenchOptions, policy_description
 from cap_bench.episode_runs import episode_record, load_records, run_episodes
 from cap_bench.graph_cli import TemplateBench
-from cap_bench.graph_client import GraphClient, outcome_name
+from cap_bench.graph_client import GraphClient, outcome_name, prediction_fields
 from cap_bench.mobile.episodes import (TEMPLATES, Episode, oracle_program, rectangle_corners, sample_episode,
                                        square_poses)
 from cap_bringup import base_path
@@ -176,7 +176,8 @@ class MobileRunner(GraphClient):
                       outcome=outcome_name(result.outcome) if result is not None else '',
                       said=list(self.said), sim_seconds=round(world.time - sim_started, 3),
                       wall_seconds=round(time.monotonic() - wall_started, 3),
-                      travelled_m=round(float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))), 3))
+                      travelled_m=round(float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))), 3),
+                      **prediction_fields(results))
         return record
 
 

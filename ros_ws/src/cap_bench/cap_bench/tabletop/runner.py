@@ -10,7 +10,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from cap_bench.episode_runs import EpisodeGraph, EpisodeRunner
-from cap_bench.graph_client import SERVICE_TIMEOUT_S, GraphClient, outcome_name, wait
+from cap_bench.graph_client import SERVICE_TIMEOUT_S, GraphClient, outcome_name, prediction_fields, wait
 from cap_bench.tabletop.episodes import Episode
 from cap_bench.tabletop.options import TabletopOptions, rgbd_camera_rate
 from cap_bench.tabletop.sampling import episode_for_key
@@ -96,7 +96,8 @@ class TabletopRunner(GraphClient):
                       sim_seconds=world.time - sim_started, wall_seconds=time.monotonic() - wall_started,
                       prompt_tokens=sum(r.prompt_tokens for r in results),
                       completion_tokens=sum(r.completion_tokens for r in results),
-                      final_state={k: [round(float(v), 4) for v in p] for k, p in final.items()})
+                      final_state={k: [round(float(v), 4) for v in p] for k, p in final.items()},
+                      **prediction_fields(results))
         if not done:
             record['reason'] = f'{_outcome_reason(results[-1].outcome)}: {results[-1].message}'
         elif not verdict.success:

@@ -25,7 +25,7 @@ from cap_bench import episode_runs, template_report
 from cap_bench.bench_options import BenchOptions, policy_description
 from cap_bench.episode_runs import episode_record, load_records, run_episodes
 from cap_bench.graph_cli import TemplateBench
-from cap_bench.graph_client import SERVICE_TIMEOUT_S, GraphClient, outcome_name
+from cap_bench.graph_client import SERVICE_TIMEOUT_S, GraphClient, outcome_name, prediction_fields
 from cap_bench.whiteboard.episodes import TEMPLATES, Episode, oracle_program, sample_episode
 from cap_bench.whiteboard.ink_check import MAX_P95_MM, MIN_COVERAGE, check_drawing, check_erased
 from cap_lmp.safe_text import one_line
@@ -84,7 +84,8 @@ class WhiteboardRunner(GraphClient):
         record.update(code='\n# ---\n'.join(r.code for r in results), success=bool(done and verdict.success),
                       outcome=outcome_name(results[-1].outcome) if results else '',
                       sim_seconds=round(world.time - sim_started, 3),
-                      wall_seconds=round(time.monotonic() - wall_started, 3), **verdict.figures())
+                      wall_seconds=round(time.monotonic() - wall_started, 3), **verdict.figures(),
+                      **prediction_fields(results))
         if not done:
             record['reason'] = f'the command ended {record["outcome"]}: {one_line(results[-1].message)}'
         elif not verdict.success:

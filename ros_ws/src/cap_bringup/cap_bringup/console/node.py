@@ -51,8 +51,9 @@ def status_record(status: StatusEvent) -> StatusRecord:
     plan = tuple({'description': step.description, 'object_name': step.object_name,
                   'target_name': step.target_name, 'points': [[p.x, p.y, p.z] for p in step.points]}
                  for step in status.plan)
+    twin = bytes(status.twin_image.data) if status.twin_image.format == 'png' else b''
     return StatusRecord(status.command_id, status.command, STAGE_NAMES.get(status.stage, str(status.stage)),
-                        status.code, status.message, plan, to_seconds(status.header.stamp))
+                        status.code, status.message, plan, to_seconds(status.header.stamp), twin)
 
 
 class ConsoleNode(Node):

@@ -14,10 +14,11 @@ requests here for any page it shows, another site's too, so every request it mar
   navigation to the page itself, which shows the page to the person and nothing to the other site.
 - Origin, when sent (always for a websocket: browsers let any site open one): only this console's.
 - Referer, when sent and there is no Sec-Fetch-Site (an older browser): only this console's page.
-- Camera streams (`/stream/<topic>`) need the page token as well: a random secret of this server, put into the page
-  it serves and passed by the page in each stream's URL (`?token=`). A page of another site cannot read the
-  console's page, so it cannot name a stream even from a browser that sends none of the headers above (an `<img>`
-  sends no Origin); this holds whatever a browser sends, which is why streams rely on it and not on headers only.
+- Camera streams (`/stream/<topic>`) and the twin's pictures (`/twin/<command id>`) need the page token as well: a
+  random secret of this server, put into the page it serves and passed by the page in each address (`?token=`). A
+  page of another site cannot read the console's page, so it cannot name a stream even from a browser that sends
+  none of the headers above (an `<img>` sends no Origin); this holds whatever a browser sends, which is why streams
+  rely on it and not on headers only.
 A program without those headers (curl, a script) is a local user, as any process on this host that can reach the
 graph is: it may do what the page does, the page token read from the page first.
 
@@ -171,6 +172,7 @@ class ConsoleServer:
         app.router.add_get('/static/{name}', self._static)
         app.router.add_get('/api/events', self._events)
         app.router.add_get('/stream/{topic:.+}', self._stream)
+        app.router.add_get('/twin/{command_id}', self._twin)
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0,
                                      logger=_OneLineLog(server_logger, {}))
         await self._runner.setup()
@@ -260,6 +262,15 @@ class ConsoleServer:
         return ''
 
     # -------------------------------------------------------------------------------------------- cameras
+    async def _twin(self, request: web.Request) -> web.Response:
+        """The twin's picture shown with a command's approval (a PNG), with the page token like a stream."""
+        if not hmac.compare_digest(request.query.get('token', '').encode(), self.page_token.encode()):
+            return web.Response(status=403, text='the twin\'s picture is shown only on the console page\n')
+        picture = self.backend.state.twin_picture(request.match_info['command_id'])
+        if not picture:
+            raise web.HTTPNotFound(text='no picture of the twin for that command\n')
+        return web.Response(body=picture, content_type='image/png', headers={'Cache-Control': 'no-store'})
+
     async def _stream(self, request: web.Request) -> web.StreamResponse:
         if not hmac.compare_digest(request.query.get('token', '').encode(), self.page_token.encode()):
             return web.Response(status=403, text='a camera stream is shown only on the console page: its address '

@@ -31,6 +31,7 @@ class StatusRecord:
     message: str = ''
     plan: tuple[dict[str, Any], ...] = ()  # {'description', 'object_name', 'target_name', 'points'}
     stamp_s: float = 0.0
+    twin_png: bytes = b''  # with awaiting_approval of a rehearsed program: the twin's scene after the rehearsal
 
 
 @dataclass
@@ -45,11 +46,14 @@ class CommandEntry:
     outcome: str = ''  # the final stage once it ended; 'lost' when lmp_node started again before that
     started_s: float = 0.0
     ended_s: float = 0.0
+    twin_png: bytes = b''  # the twin's picture shown with the approval (served apart: `twin_picture`)
+    twin_version: int = 0  # grows with each picture, so that the page asks for the new one
 
     def view(self) -> dict[str, Any]:
         return {'id': self.command_id, 'command': self.command, 'stage': self.stage, 'code': self.code,
                 'message': self.message, 'plan': self.plan, 'said': self.said, 'outcome': self.outcome,
-                'started': self.started_s, 'ended': self.ended_s}
+                'started': self.started_s, 'ended': self.ended_s,
+                'twin': self.twin_version if self.twin_png else 0}
 
 
 class ConsoleState:
@@ -97,6 +101,8 @@ class ConsoleState:
             entry.message = record.message[:MAX_TEXT]
             if record.stage == 'awaiting_approval':
                 entry.plan = [dict(step) for step in record.plan]
+                if record.twin_png:
+                    entry.twin_png, entry.twin_version = record.twin_png, entry.twin_version + 1
             if record.stage in FINAL_STAGES:
                 entry.outcome = record.stage
                 entry.ended_s = record.stamp_s
@@ -152,6 +158,12 @@ class ConsoleState:
             return {'version': self.version, 'namespace': self._namespace, 'graph': self._graph_state,
                     'streams': list(self._streams), 'notices': list(self._notices),
                     'commands': [entry.view() for entry in self._commands]}
+
+    def twin_picture(self, command_id: str) -> bytes:
+        """The PNG of the twin's scene shown with a command's approval (empty if it has none)."""
+        with self._lock:
+            entry = self._by_id.get(command_id)
+            return entry.twin_png if entry is not None else b''
 
     def awaiting_approval(self) -> list[str]:
         """The ids of the commands whose code waits for approval."""

@@ -22,6 +22,7 @@ from cap_ros_common.transforms import TransformError
 from nav2_msgs.action import NavigateToPose
 from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from rclpy.action import ActionServer
+from std_srvs.srv import Trigger
 
 from cap_control import ros_conversions as conv
 from cap_control.mobile_pick_place.executor import (
@@ -94,7 +95,15 @@ class MobilePickPlaceNode(ArmNode):
         self._server = ActionServer(self, MobilePickPlace, GraphNames.MOBILE_PICK_PLACE_ACTION, self._execute,
                                     goal_callback=self._on_goal, cancel_callback=self._on_cancel,
                                     result_timeout=RESULT_TIMEOUT_S, callback_group=self.callbacks)
+        self.create_service(Trigger, GraphNames.CONTROL_FORGET_SERVICE, self._on_forget,
+                            callback_group=self.callbacks)
         self.get_logger().info('mobile pick-and-place ready')
+
+    def _on_forget(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """The scene was replaced: the gripper holds nothing it knows of."""
+        self.executor_.held = None
+        response.success, response.message = True, 'the gripper holds nothing'
+        return response
 
     def _create_perception_clients(self) -> None:
         from cap_interfaces.srv import GetObjectNames, GetObjectState

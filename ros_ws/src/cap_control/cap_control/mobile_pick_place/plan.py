@@ -42,6 +42,8 @@ DROP_CLEARANCE = 0.12  # [m] the held object's bottom above a bin's rim when it 
 TRAVEL_SAG = 0.05  # [m] a move over a spot may dip this much below its end height
 CARRY_OUT = 0.4  # [m] ahead of the arm's base, where the tool goes straight out of the carry pose before a place
 PLACE_TOLERANCE = 0.05  # [m] of an object placed at a spot from the spot
+# Above the arm's base [m]: the least height a pick comes out at, above every object the kitchen's furniture holds.
+OVER_HEIGHT = 0.45
 MIN_GRASP_HEIGHT = 0.016  # [m] of the tool centre above the surface an object stands on
 # The gripper's palm is 70 mm above the tool centre (models/ur5e_gripper.xml): a grasp goes at most this far below
 # an object's top.
@@ -155,17 +157,21 @@ def plan_pick(obj: ObjectInfo, world_obj: ObjectInfo, joints: Sequence[float],
     # object (a bottle) near enough its top that the palm stays above it.
     grasp_z = max(obj.bottom + config.grasp_height_fraction * obj.size[2], obj.bottom + MIN_GRASP_HEIGHT,
                   obj.top - MAX_GRASP_DEPTH)
-    # The arm comes out of the carry pose at its height (or higher), then goes straight down: moving out lower, the
+    # The arm comes out over the object at OVER_HEIGHT (or higher), then goes straight down: moving out lower, the
     # arm swept a can standing beside the object off the desk.
-    above_z = max(obj.top + APPROACH_CLEARANCE, robot.CARRY_TCP[2])
+    above_z = max(obj.top + APPROACH_CLEARANCE, OVER_HEIGHT)
     planner = _Planner(config, joints)
     x, y = obj.position[:2]
     yaw = planner.best_yaw((x, y, above_z), [obj.yaw + quarter * math.pi / 2 + k * math.pi for k in (-1, 0, 1)],
                            f'the {obj.name}')
     tolerance = config.grasp_width_tolerance
+    # Up over the base first, then out: a joint move straight from the stowed pose to above the object swings the
+    # gripper forward below the furniture's top, into a countertop's front edge (a rehearsal on the twin saw it).
+    rise = planner.joint_move(robot.CARRY_TCP, yaw, 'over the base')
     stages = [
-        Stage(StageName.APPROACH, [GripperStep(config.gripper_open_width, wait=False),
-                                   planner.joint_move((x, y, above_z), yaw, f'above the {obj.name}')],
+        Stage(StageName.APPROACH, [GripperStep(config.gripper_open_width, wait=False), rise,
+                                   planner.travel((x, y, above_z), yaw, f'above the {obj.name}',
+                                                  above_z - TRAVEL_SAG)],
               failure_code=PickPlaceErrorCode.IK_FAILED),
         Stage(StageName.DESCEND, [planner.line((x, y, grasp_z), yaw, f'the {obj.name}')],
               failure_code=PickPlaceErrorCode.IK_FAILED),

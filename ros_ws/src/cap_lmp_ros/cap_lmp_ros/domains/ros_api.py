@@ -128,6 +128,16 @@ class RosRobotApi:
             raise RobotApiError(response.message or f'unknown object {name!r}')
         return response.state
 
+    def object_states(self) -> list[Any]:
+        """Every object perception knows, as ObjectState messages (what a twin of the scene is built from)."""
+        states = []
+        for name in self.get_obj_names():
+            response = self._call(self._state, GetObjectState.Request(name=wire_text(name, MAX_NAME_CHARS)),
+                                  'the perception service')
+            if response.success:
+                states.append(response.state)
+        return states
+
     def get_obj_pos(self, name: str) -> np.ndarray:
         """Centre of the object on the table, np.array([x, y]) in metres."""
         state = self._object(name)

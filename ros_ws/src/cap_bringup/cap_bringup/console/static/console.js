@@ -63,6 +63,16 @@ function renderPlan(list, plan) {
   if (plan.length === 0) list.append(element('li', 'no robot action'));
 }
 
+function renderTwin(command) {
+  // The twin's picture after the rehearsal, beside the live cameras: fetched again only when it changed.
+  const figure = $('twin');
+  figure.hidden = !command || !command.twin;
+  if (figure.hidden) return;
+  const source = '/twin/' + encodeURIComponent(command.id) + '?v=' + command.twin + '&token=' +
+    encodeURIComponent(pageToken);
+  if ($('twin-image').getAttribute('src') !== source) $('twin-image').setAttribute('src', source);
+}
+
 function renderCurrent(commands) {
   // One command runs at a time; those received after it wait in lmp_node's queue.
   const open = commands.filter((c) => !c.outcome);
@@ -82,6 +92,7 @@ function renderCurrent(commands) {
   const awaiting = running.stage === 'awaiting_approval';
   $('approval').hidden = !awaiting;
   if (awaiting) renderPlan($('plan'), running.plan);
+  renderTwin(awaiting ? running : null);
   $('current-said').replaceChildren(...running.said.map((line) => element('li', line)));
 }
 
