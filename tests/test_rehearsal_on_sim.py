@@ -64,6 +64,8 @@ WHITEBOARD = {
     'harmful': {
         'wipe through the lemon': (
             "p = get_obj_pos('lemon')\nerase(np.array([p - np.array([0.06, 0.0]), p + np.array([0.06, 0.0])]))"),
+        'draw a line through the apple': (
+            "p = get_obj_pos('apple')\ndraw(np.array([p - np.array([0.06, 0.0]), p + np.array([0.06, 0.0])]))"),
         'draw off the board': 'draw(np.array([[0.0, -0.45], [0.0, -1.2]]))',
     },
 }
@@ -220,5 +222,6 @@ def test_harmful_programs_elsewhere_are_refused_by_the_twin(tmp_path, domain, sp
         rehearsed.close()
     if domain == 'mobile':  # the pick would have happened: the place is what fails, on the twin
         assert 'the water bottle at' in messages['pick the apple, then put it against the water bottle']
-    else:  # what only the twin's physics could tell
+    else:  # what only the twin's physics could tell: the lemon wiped away, the marker pressed into the apple
         assert 'the lemon ' in messages['wipe through the lemon']
+        assert 'the marker pressed the board too hard' in messages['draw a line through the apple']

@@ -61,6 +61,7 @@ from cap_lmp.approval import ApprovalGate, PlannedCall, recorders, session_copy
 from cap_lmp.errors import (CapLLMError, CodeRejected, ExecutionStopped, GenerationError, NotApproved, UndefinedName,
                             UnusableAnswer)
 from cap_lmp.feedback import action_recorders, continue_query, failure_lines, feedback_block, worth_feedback
+from cap_lmp.rehearsal import RESTART_REHEARSAL
 from cap_lmp.functions import top_level_functions, undefined_calls
 from cap_lmp.llm import Completion, CompletionRequest, LLMClient
 from cap_lmp.outcome import Outcome, outcome_of
@@ -244,6 +245,9 @@ class Engine:
             raise ValueError('an Engine needs at least one LMP')
         self.client = client
         self.api = dict(api or {})
+        # The node's call that rebuilds the twin for a new rehearsal (cap_lmp.rehearsal): the engine's, not the
+        # program's, so it is kept out of the program's scope.
+        self._restart_rehearsal = self.api.pop(RESTART_REHEARSAL, None)
         self.sandbox = Sandbox(limits)
         self.default_lmp = default_lmp or next(iter(self.lmps))
         self.fgen_lmp = fgen_lmp if fgen_lmp in self.lmps else None
@@ -589,8 +593,8 @@ class Engine:
                 self._emit(CODE, name, code=result.code)
                 if self.approval is not None:
                     planning = True
-                    plan = self._plan(config, prepared, command, context)
-                    shown = self._code_for_approval(result.code)
+                    prepared, plan = self._plan_with_feedback(config, prepared, command, context, result)
+                    shown = self._code_for_approval(prepared.full_code())  # what runs, not earlier rounds
                     planning = False
                     self.approval(shown, plan)
                     self._check_cancel()
@@ -691,6 +695,39 @@ class Engine:
             result.code = f'{result.code}\n\n# round {rounds}, after: {stopped}\n{prepared.full_code()}'
             self._emit(CODE, config.name, code=prepared.full_code())
             self._emit(EXECUTING, config.name, code=result.code)
+
+    def _plan_with_feedback(self, config: LMPConfig, prepared: PreparedCode, command: str, context: str,
+                            result: CommandResult) -> tuple[PreparedCode, list[PlannedCall]]:
+        """The plan phase; when it is a rehearsal on a twin and `feedback_rounds` allows, a program that failed
+        there (an error, harm the twin saw) is followed by a new one, written by the model from what the twin saw,
+        and rehearsed on a twin built again: the robot has not moved, so the new program does the whole command.
+        What the twin saw is the failure a closed loop learns from (see _execute_with_feedback for the real run's)."""
+        rounds = 0
+        while True:
+            try:
+                return prepared, self._plan(config, prepared, command, context)
+            except Exception as error:
+                if not (self.rehearse and self._restart_rehearsal is not None and rounds < self.feedback_rounds
+                        and worth_feedback(error)):
+                    raise
+                line, source_line, _origin = self._locate(error)
+                what = failure_lines(error, line, source_line, [])
+                what[0] = what[0].replace('# the program above stopped', '# rehearsed on a twin, the program above '
+                                                                        'stopped', 1)
+            rounds += 1
+            stopped = what[0].removeprefix('# ')
+            self._emit(GENERATING, config.name, message=f'{command} (rehearsal round {rounds} of '
+                                                        f'{self.feedback_rounds}: {stopped})')
+            feedback = feedback_block(config.query_prefix, config.query_suffix, context, command,
+                                      prepared.main.source, what)
+            self._restart_rehearsal()  # the twin as the world is: nothing of the failed program stays on it
+            failed_source = prepared.main.source.strip()
+            prepared = self.generate(config.name, continue_query(command), context, feedback=feedback)
+            if prepared.main.source.strip() == failed_source:  # as in _execute_with_feedback: sampled once
+                prepared = self.generate(config.name, continue_query(command), context, feedback=feedback,
+                                         first_attempt=1)
+            result.code = f'{result.code}\n\n# rehearsal round {rounds}, after: {stopped}\n{prepared.full_code()}'
+            self._emit(CODE, config.name, code=prepared.full_code())
 
     def _plan(self, config: LMPConfig, prepared: PreparedCode, query: str, context: str) -> list[PlannedCall]:
         """Run the program in plan-only mode (see approval.py) and return the calls it would make of the

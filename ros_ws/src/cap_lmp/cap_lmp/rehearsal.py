@@ -39,6 +39,11 @@ PREDICTION_TOLERANCE = 0.03  # [m] an object farther than this from where the tw
 STILL_M = 0.01  # [m] an object the twin moved less than this, it did not move
 
 
+# The node's function (in the robot API the engine is given, kept out of the program's scope) that rebuilds the twin
+# for a new rehearsal of the same command: a program that failed on the twin is followed by a new one (feedback).
+RESTART_REHEARSAL = 'restart_rehearsal'
+
+
 class TwinHarm(RobotApiError):
     """The twin saw harm during a robot call of the rehearsal: the program stops there (and the robot never
     moves)."""
@@ -178,5 +183,6 @@ def prediction_text(misses: Sequence[PredictionMiss], compared: int, tolerance: 
     return f'{len(misses)} of {compared} object(s) not where the twin predicted: ' + '; '.join(parts)
 
 
-__all__ = ['PREDICTION_TOLERANCE', 'REHEARSAL_TOLERANCE', 'REHEARSE_MODES', 'UNHELD_WHEN_REHEARSED', 'PredictionMiss',
-           'Rehearsal', 'TwinHarm', 'TwinVerdict', 'harm_text', 'prediction_misses', 'prediction_text', 'rehearses']
+__all__ = ['PREDICTION_TOLERANCE', 'REHEARSAL_TOLERANCE', 'REHEARSE_MODES', 'RESTART_REHEARSAL',
+           'UNHELD_WHEN_REHEARSED', 'PredictionMiss', 'Rehearsal', 'TwinHarm', 'TwinVerdict', 'harm_text',
+           'prediction_misses', 'prediction_text', 'rehearses']

@@ -12,8 +12,8 @@ from cap_lmp.errors import NotApproved, UnapprovedAction
 from cap_lmp.isolated_engine import IsolatedEngine
 from cap_lmp.llm import OpenAICompatibleClient
 from cap_lmp.outcome import Outcome
-from cap_lmp.rehearsal import (REHEARSAL_TOLERANCE, UNHELD_WHEN_REHEARSED, PredictionMiss, Rehearsal, TwinHarm,
-                               harm_text, prediction_misses, prediction_text, rehearses)
+from cap_lmp.rehearsal import (REHEARSAL_TOLERANCE, RESTART_REHEARSAL, UNHELD_WHEN_REHEARSED, PredictionMiss,
+                               Rehearsal, TwinHarm, harm_text, prediction_misses, prediction_text, rehearses)
 from cap_lmp.sandbox import SandboxLimits
 from cap_lmp.testing.openai_server import ScriptedOpenAIServer
 from cap_lmp.testing.toy_domain import ACTING_FUNCTIONS, build_engine
@@ -32,6 +32,8 @@ PROGRAMS = {
         "put_first_on_second('red block', 'blue bowl')\n"
         "x = 1 / 0"),
     'knock the blue bowl over': "put_first_on_second('blue block', 'red bowl')\nsay('never said')",
+    'knock the blue bowl over, finishing what the program above did not do': (
+        "put_first_on_second('blue block', 'blue bowl')\nsay('done, the other way')"),
     'ignore the harm': (
         "try:\n"
         "    put_first_on_second('blue block', 'red bowl')\n"
@@ -51,7 +53,18 @@ class Node:
         self.refusals = 0
         robot_api = guarded_functions(robot.api(), self.guard, self._refused)
         self.api = self.rehearsal.routed(robot_api, twin.api(), self.check_harm)
+        self.api[RESTART_REHEARSAL] = self.restart
         self.rehearsed: list[PlannedCall] = []
+        self.restarts = 0
+
+    def restart(self) -> None:
+        """The twin built again from the robot's world (which the rehearsal never touched)."""
+        self.twin.positions = {name: xy.copy() for name, xy in self.robot.positions.items()}
+        self.twin.moves.clear()
+        self.twin.said.clear()
+        self.findings = []
+        self.restarts += 1
+        self.rehearsal.begin()
 
     def _refused(self) -> None:
         self.refusals += 1
@@ -80,9 +93,9 @@ def server():
         yield scripted
 
 
-def _engine(server: ScriptedOpenAIServer, node: Node, isolated: bool):
+def _engine(server: ScriptedOpenAIServer, node: Node, isolated: bool, feedback_rounds: int = 0):
     client = OpenAICompatibleClient(server.base_url, 'scripted-model', timeout_s=10.0)
-    options = {'plan_functions': list(ACTING_FUNCTIONS)}
+    options = {'plan_functions': list(ACTING_FUNCTIONS), 'feedback_rounds': feedback_rounds}
     if isolated:
         engine = IsolatedEngine(build_engine, node.api, client, SandboxLimits(time_limit_s=5.0),
                                 engine_options=options, address_space_extra_bytes=400 << 20)
@@ -97,8 +110,8 @@ def isolated(request) -> bool:
     return request.param == 'sandbox process'
 
 
-def _run(server, node: Node, isolated: bool, command: str):
-    engine = _engine(server, node, isolated)
+def _run(server, node: Node, isolated: bool, command: str, feedback_rounds: int = 0):
+    engine = _engine(server, node, isolated, feedback_rounds)
     try:
         node.begin()
         result = engine.run(command)
@@ -140,6 +153,23 @@ def test_harm_the_twin_saw_stops_the_program_at_that_line(server, isolated):
     assert 'on the twin, put_first_on_second() did harm: the blue block knocked the red bowl over' in result.message
     assert 'line 1' in result.message
     assert robot.moves == [] and robot.said == [] and twin.said == []  # stopped there: the say never came
+
+
+def test_with_feedback_rounds_what_the_twin_saw_brings_a_new_program_rehearsed_on_a_new_twin(server, isolated):
+    robot, twin = ToyWorld.with_objects(SCENE), ToyWorld.with_objects(SCENE)
+    node = Node(robot, twin, harmful={('blue block', 'red bowl')})
+    result = _run(server, node, isolated, 'knock the blue bowl over', feedback_rounds=1)
+    assert result.success, result.message
+    assert node.restarts == 1  # the twin was built again for the second program
+    assert robot.moves == [('blue block', 'blue bowl')] and robot.said == ['done, the other way']
+    assert [(c.function, c.args) for c in node.rehearsed] == [('put_first_on_second', ('blue block', 'blue bowl')),
+                                                              ('say', ('done, the other way',))]
+    asked = [r.prompt for r in server.requests if 'finishing what the program above did not do' in r.prompt]
+    assert len(asked) == 1
+    assert "# rehearsed on a twin, the program above stopped at line 1 (`put_first_on_second('blue block', " \
+        "'red bowl')`): " in asked[0]  # TwinHarm here, RobotApiError across the sandbox process
+    assert 'on the twin, put_first_on_second() did harm: the blue block knocked the red bowl over' in asked[0]
+    assert '# rehearsal round 1, after: rehearsed on a twin' in result.code
 
 
 def test_a_program_that_swallows_the_harm_is_still_refused(server, isolated):

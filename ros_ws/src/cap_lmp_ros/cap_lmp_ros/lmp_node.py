@@ -17,6 +17,12 @@ every robot call and model request (cap_lmp.approval.ApprovalGuard), so that nei
 process can get around it: no acting call before approval, after it only the approved calls in their order, and no
 new code from the model; a call that breaks this is refused, the program stopped and the command refused.
 
+With `rehearse` (always, or on_approval with require_approval), each program first runs whole on a twin of the
+scene (cap_lmp.rehearsal, cap_lmp_ros.twin): the node routes its robot calls to the twin, and only a clean
+rehearsal lets it run on the robot, held to the motions the twin received; harm or an error there refuses the
+command with what the twin saw and where. With feedback_rounds, a program that failed on the twin is followed by a
+new one, rehearsed on a twin built again. After the real run, the result compares the world with the prediction.
+
 Whatever a program or a model produced is made safe before it leaves the node (safe_text.wire_text: valid UTF-8,
 bounded; logs also without control characters), so no text can kill the thread that publishes it. If the worker
 thread dies anyway, the node refuses every later command naming the cause, and the standalone process (`main`)
@@ -61,8 +67,8 @@ from cap_lmp.llm import NO_MODEL_CONFIGURED
 from cap_lmp.local_model import INSTALL_HINT
 from cap_lmp.local_server import LocalModelClient, LocalModelServer, ServerSettings, server_binary, warm_up
 from cap_lmp.outcome import Outcome
-from cap_lmp.rehearsal import (REHEARSAL_TOLERANCE, REHEARSE_MODES, UNHELD_WHEN_REHEARSED, Rehearsal, TwinVerdict,
-                                prediction_misses, prediction_text, rehearses)
+from cap_lmp.rehearsal import (REHEARSAL_TOLERANCE, REHEARSE_MODES, RESTART_REHEARSAL, UNHELD_WHEN_REHEARSED, Rehearsal,
+                                TwinVerdict, prediction_misses, prediction_text, rehearses)
 from cap_lmp.safe_text import terminal_text, wire_text
 from cap_lmp.sandbox import IN_PROCESS_WARNING, SandboxLimits
 from cap_lmp.wire import MAX_CODE_CHARS
@@ -178,6 +184,7 @@ class LmpNode(Node):
                              config.service_timeout_s)
             api = self.rehearsal.routed(api, engine_api(self.domain, self.twin.binding.functions()),
                                         self.twin.check_harm)
+            api[RESTART_REHEARSAL] = self._restart_rehearsal  # the engine's, for a feedback round on the twin
         limits = SandboxLimits(time_limit_s=config.time_limit_s)
         engine_options = {'regenerations': config.regenerations, 'plan_functions': list(self.domain.plan_functions),
                           'feedback_rounds': config.feedback_rounds}
@@ -515,6 +522,16 @@ class LmpNode(Node):
         job.verdict.rehearse_s = -time.monotonic()  # counted from here; completed by the gate
         self.rehearsal.begin()
         return True
+
+    def _restart_rehearsal(self) -> None:
+        """The engine asks for a new rehearsal of the running command (its program failed on the twin, and the
+        model wrote another): the twin is built again from the world as it is, the calls recorded so far dropped."""
+        job = self._current
+        if job is None or job.verdict is None or not self.rehearsal.active:
+            raise RobotApiError('no rehearsal is running')
+        assert self.twin is not None
+        job.verdict.start = self.twin.build()
+        self.rehearsal.begin()
 
     def _gate(self, code: str, calls: list[PlannedCall]) -> None:
         """The engine's gate after its plan run (on the worker thread): a rehearsal's verdict first, then a
