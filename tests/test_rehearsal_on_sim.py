@@ -22,7 +22,9 @@ from cap_bringup.graph import Graph, GraphOptions
 from cap_interfaces.action import ExecuteCommand
 from cap_interfaces.msg import GraphNames, StatusEvent
 from cap_interfaces.srv import ApproveCommand
+from cap_lmp.cassette import Cassette, CassetteEntry
 from cap_lmp_ros.lmp_node import EVENT_QOS
+from cap_lmp_ros.testing.lmp_graph import wait_for
 from conftest import next_domain_id
 
 pytestmark = pytest.mark.slow
@@ -71,24 +73,6 @@ WHITEBOARD = {
 }
 
 
-def _cassette(lmp: str, programs: dict[str, str]) -> str:
-    entries = []
-    for query, code in programs.items():
-        body = '\n'.join(f'    {line}' for line in code.splitlines())
-        entries.append(f"- lmp: {lmp}\n  query: {query}\n  context: '*'\n  source: written by hand for this test\n"
-                       f"  completion: |-\n{body}\n")
-    return 'format: cap-llm-cassette/1\nentries:\n' + ''.join(entries)
-
-
-def _wait(predicate, timeout: float = 120.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return bool(predicate())
-
-
 class Rehearsed:
     """A domain's graph with rehearsal on, and a client that resets the scene and sends commands."""
 
@@ -99,7 +83,8 @@ class Rehearsed:
         if 'good' in spec:
             programs[spec['good'][0]] = spec['good'][1]
         cassette = tmp_path / f'{domain}.yaml'
-        cassette.write_text(_cassette(spec['lmp'], programs), encoding='utf-8')
+        Cassette(cassette, [CassetteEntry(spec['lmp'], query, '*', code, 'written by hand for this test')
+                            for query, code in programs.items()]).save()
         self.objects = [name.strip() for name in spec['objects'].split(',') if name.strip()] or None
         self.graph = Graph(self.context, GraphOptions(domain=domain, seed=0, objects=spec['objects'],
                                                       cassette=str(cassette), rehearse='always'))
@@ -111,7 +96,7 @@ class Rehearsed:
         self.approve = self.node.create_client(ApproveCommand, GraphNames.APPROVE_SERVICE)
         self.parameters = self.node.create_client(SetParameters, '/lmp_node/set_parameters')
         self.graph.executor.add_node(self.node)
-        assert _wait(lambda: self.execute.server_is_ready() and self.parameters.service_is_ready())
+        assert wait_for(lambda: self.execute.server_is_ready() and self.parameters.service_is_ready(), 120.0)
 
     def reset(self) -> None:
         self.graph.nodes['sim_bridge'].reset_world(0, self.objects)
@@ -131,14 +116,14 @@ class Rehearsed:
         box: dict = {}
         self.execute.send_goal_async(ExecuteCommand.Goal(command=command)).add_done_callback(
             lambda f: f.result().get_result_async().add_done_callback(lambda r: box.update(r=r.result().result)))
-        assert _wait(lambda: 'r' in box, 300.0), f'no result for {command!r}'
+        assert wait_for(lambda: 'r' in box, 300.0), f'no result for {command!r}'
         return box['r']
 
     def require_approval(self, required: bool) -> None:
         value = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=required)
         future = self.parameters.call_async(SetParameters.Request(parameters=[
             ParameterMsg(name='require_approval', value=value)]))
-        assert _wait(future.done) and future.result().results[0].successful
+        assert wait_for(future.done, 60.0) and future.result().results[0].successful
 
     def close(self) -> None:
         self.graph.close()
@@ -200,14 +185,15 @@ def test_approval_shows_the_rehearsal_and_the_twin_picture(tabletop):
         tabletop.execute.send_goal_async(ExecuteCommand.Goal(command='put the red block in the red bowl')) \
             .add_done_callback(lambda f: f.result().get_result_async().add_done_callback(
                 lambda r: box.update(r=r.result().result)))
-        assert _wait(lambda: any(s.stage == StatusEvent.STAGE_AWAITING_APPROVAL for s in tabletop.statuses))
+        assert wait_for(lambda: any(s.stage == StatusEvent.STAGE_AWAITING_APPROVAL for s in tabletop.statuses),
+                        120.0)
         waiting = next(s for s in tabletop.statuses if s.stage == StatusEvent.STAGE_AWAITING_APPROVAL)
         assert 'rehearsed on the twin (1 action(s)' in waiting.message, waiting.message
         assert waiting.twin_image.format == 'png' and bytes(waiting.twin_image.data[:4]) == b'\x89PNG'
         joints, _, objects = tabletop.state()  # rehearsed, not yet approved: nothing moved
         future = tabletop.approve.call_async(ApproveCommand.Request(command_id=waiting.command_id, approve=True))
-        assert _wait(future.done) and future.result().success
-        assert _wait(lambda: 'r' in box, 120.0)
+        assert wait_for(future.done, 60.0) and future.result().success
+        assert wait_for(lambda: 'r' in box, 120.0)
         assert box['r'].outcome == ExecuteCommand.Result.OUTCOME_DONE, box['r'].message
     finally:
         tabletop.require_approval(False)

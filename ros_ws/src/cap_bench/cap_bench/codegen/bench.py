@@ -236,4 +236,4 @@ def main(argv: list[str] | None = None) -> int:
     generations = choose(args.generation, GENERATIONS, '--generation', 'cap bench codegen')
     return run_main(lambda: run(policy_of(args), pathlib.Path(args.out), prompts=prompts, generations=generations,
                                 jobs=args.jobs, resume=args.resume, limit=args.limit, time_limit_s=args.time_limit,
-                                jail=args.jail, show_progress=not args.no_progress), args.out)
+                                jail=args.jail, show_progress=not args.no_progress), args.out, args)

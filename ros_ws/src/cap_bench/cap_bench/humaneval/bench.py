@@ -202,4 +202,4 @@ def main(argv: list[str] | None = None) -> int:
     return run_main(lambda: run(policy_of(args), pathlib.Path(args.out), generations=generations,
                                 samples=args.samples, temperature=args.temperature, jobs=args.jobs,
                                 resume=args.resume, limit=args.limit, time_limit_s=args.time_limit, jail=args.jail,
-                                show_progress=not args.no_progress), args.out)
+                                show_progress=not args.no_progress), args.out, args)

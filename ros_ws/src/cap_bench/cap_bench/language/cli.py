@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from cap_bench.language.policy import PolicyOptions
 from cap_lmp.errors import CapLLMError
@@ -17,6 +18,12 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, out: str, time_limi
     parser.add_argument('--policy', choices=('oracle', 'llm'), default='oracle',
                         help='oracle: the reference answers, served over HTTP on 127.0.0.1; llm: the model at '
                              '--base-url / CAP_LLM_BASE_URL [oracle]')
+    parser.add_argument('--backend', choices=('http', 'local'), default='http',
+                        help='for --policy llm: http (--base-url) or local (the llama.cpp server and model of `make '
+                             'model`, started for the run and stopped after it; completions API) [http]')
+    parser.add_argument('--model-file', default='', help='with --backend local: a GGUF file [the default model]')
+    parser.add_argument('--model-threads', type=int, default=2,
+                        help='with --backend local: server threads [2: no simulator runs beside it]')
     parser.add_argument('--base-url', default='', help='for --policy llm; default CAP_LLM_BASE_URL')
     parser.add_argument('--model', default='', help='for --policy llm; default CAP_LLM_MODEL')
     parser.add_argument('--api', choices=('completions', 'chat'), default='completions',
@@ -58,12 +65,35 @@ def _raise_interrupted(signum: int, _frame: Any) -> None:
     raise Interrupted(signum)
 
 
-def run_main(run: Callable[[], dict[str, Any]], out: str) -> int:
+@contextlib.contextmanager
+def local_model(args: argparse.Namespace | None) -> Iterator[None]:
+    """With --policy llm --backend local: the local model server for the whole run, its endpoint put into `args`
+    (policy_of reads it); otherwise nothing."""
+    if args is None or args.policy != 'llm' or getattr(args, 'backend', 'http') != 'local':
+        yield
+        return
+    from cap_lmp.local_server import LocalModelServer, ServerSettings
+
+    if args.jobs != 1:
+        raise ValueError('--backend local answers one request at a time: use --jobs 1')
+    server = LocalModelServer(ServerSettings(model_file=args.model_file, threads=args.model_threads),
+                              on_event=lambda message: print(message, file=sys.stderr))
+    server.start()  # stops the server itself if it cannot start
+    try:
+        args.base_url, args.model, args.api = server.base_url, server.model_name, 'completions'
+        yield
+    finally:
+        server.stop()
+
+
+def run_main(run: Callable[[], dict[str, Any]], out: str, args: argparse.Namespace | None = None) -> int:
     """Run a benchmark with SIGINT/SIGTERM ending it cleanly (exit 130/143; --resume continues), print the
-    report's path; a failure is one line and exit 1."""
+    report's path; a failure is one line and exit 1. With `args` of --backend local, the local model server runs
+    around it."""
     previous = {signum: signal.signal(signum, _raise_interrupted) for signum in EXIT_INTERRUPTED}
     try:
-        summary = run()
+        with local_model(args):
+            summary = run()
     except Interrupted as interrupted:
         print(f'interrupted: the items finished so far are in {out}/items.jsonl; continue with --resume',
               file=sys.stderr)

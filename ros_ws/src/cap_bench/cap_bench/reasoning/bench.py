@@ -170,4 +170,4 @@ def main(argv: list[str] | None = None) -> int:
     styles = choose(args.styles, STYLES, '--styles', 'cap bench reasoning')
     return run_main(lambda: run(policy_of(args), pathlib.Path(args.out), styles=styles, jobs=args.jobs,
                                 resume=args.resume, limit=args.limit, time_limit_s=args.time_limit, jail=args.jail,
-                                show_progress=not args.no_progress), args.out)
+                                show_progress=not args.no_progress), args.out, args)
