@@ -1,7 +1,8 @@
 """Bring up a domain's whole graph in one process: the sim bridge and robot_state (standing in for a robot's drivers),
 the domain's perception and control nodes (for the table top: perception and pick-and-place), lmp_node and the
 visualization node (RViz's /cap/markers); in hardware mode (`GraphOptions(hardware=PROFILE)`) the robot's own
-drivers instead of the first two (cap_bringup.hardware).
+drivers instead of the first two (cap_bringup.hardware). When lmp_node rehearses programs (its `rehearse`), the
+twin's simulator, perception and control nodes too, under <namespace>/twin (cap_bringup.nodes.twin_nodes).
 
 `cap up`, the demo, the integration tests and the benchmark all start the graph as a `Graph`, so they run the same
 nodes with the same parameters (each node's defaults from its config dataclass, then its package's config/*.yaml,
