@@ -488,7 +488,8 @@ class SimBridgeNode(Node):
         return response
 
     # --------------------------------------------------------------------------------------------- reset
-    def reset_world(self, seed: int, specs=None, arm_joints=None, base_pose=None, exactly: bool = False) -> list:
+    def reset_world(self, seed: int, specs=None, arm_joints=None, base_pose=None, exactly: bool = False,
+                    ghost_overlaps: bool = False) -> list:
         """Reset the world (objects: specs, or when there are none the seed's episode, unless `exactly`; the arm at
         `arm_joints` and a mobile base at `base_pose`, else where the scene starts them) and tell the graph; the
         states settled. A stand-in is reset this way by the test that plays the world around the robot (it offers no
@@ -496,7 +497,7 @@ class SimBridgeNode(Node):
         self.lockstep.release()  # a reset ends a controller's hold on the world
         with self.world.lock:  # the physics loop's watch sees the new scene only once it watches it
             states = self.world.reset(seed, specs if specs or exactly else None, arm_joints=arm_joints,
-                                      base_pose=base_pose)
+                                      base_pose=base_pose, ghost_overlaps=ghost_overlaps)
             if self.twin_watch is not None:
                 self.twin_watch.start()
         self._scene_reset.set()
@@ -511,14 +512,17 @@ class SimBridgeNode(Node):
                                  f'"{self.world.scene_name}"')
             states = self.reset_world(request.seed, [conv.object_spec(o) for o in request.objects],
                                       arm_joints=list(request.arm_joint_positions) or None,
-                                      base_pose=list(request.base_pose) or None, exactly=request.exactly)
+                                      base_pose=list(request.base_pose) or None, exactly=request.exactly,
+                                      ghost_overlaps=request.ghost_overlaps)
         except ValueError as error:
             response.success = False
             response.message = str(error)
             return response
         response.success = True
+        ghosts = [spec.name for spec in self.world.objects if not spec.solid]
         response.message = f'scene "{self.world.scene_name}" seed {request.seed}: ' + \
-            ', '.join(s.name for s in states)
+            ', '.join(s.name for s in states) + (f'; ghosts (placed into another): {", ".join(ghosts)}' if ghosts
+                                                 else '')
         response.objects = [conv.object_state_msg(s) for s in states]
         return response
 

@@ -49,6 +49,9 @@ class ObjectSpec:
     position: tuple[float, float] | None = None
     height: float | None = None
     yaw: float = 0.0
+    # False: a ghost, which nothing touches and gravity does not move: a twin's object that perception may have seen
+    # twice (it is there to be named; cap_lmp_ros.twin)
+    solid: bool = True
 
     @classmethod
     def from_name(cls, name: str, position: tuple[float, float] | None = None) -> 'ObjectSpec':
@@ -115,7 +118,13 @@ def add_objects(spec: mujoco.MjSpec, objects: Iterable[ObjectSpec]) -> mujoco.Mj
         obj.validate()
         body = spec.worldbody.add_body(name=obj.name, pos=[0.0, 0.0, resting_height(obj.category)])
         body.add_freejoint(name=obj.name)
+        first_geom = len(spec.geoms)
         _kinds[obj.category].add_geoms(body, obj)
+        if not obj.solid:
+            body.gravcomp = 1.0
+            for geom in spec.geoms[first_geom:]:
+                geom.contype = geom.conaffinity = 0
+                geom.rgba[3] = 0.3
     return spec
 
 

@@ -54,7 +54,7 @@ def object_spec(msg: ObjectSpecMsg) -> ObjectSpec:
                       color_name=msg.color_name or from_name.color_name,
                       position=(msg.position.x, msg.position.y) if msg.use_position else None,
                       height=msg.position.z if msg.use_position and msg.use_height else None,
-                      yaw=msg.yaw if msg.use_position and math.isfinite(msg.yaw) else 0.0)
+                      yaw=msg.yaw if msg.use_position and math.isfinite(msg.yaw) else 0.0, solid=not msg.ghost)
 
 
 def joint_state_msg(seconds: float, names: Sequence[str], positions: np.ndarray, velocities: np.ndarray,

@@ -114,7 +114,10 @@ class TwinWatch:
             self._severity: dict[str, int] = {}
             self._held.clear()
             self._starts = {}
+            ghosts = {spec.name for spec in world.objects if not spec.solid}  # nothing touches them
             for state in world.object_states():
+                if state.name in ghosts:
+                    continue
                 body = world._object_body_ids[state.name]
                 self._starts[state.name] = _Start(np.array(state.position), _up_axis(data.xquat[body]))
             self._allowed_pairs = {pair for _, pair, _ in self._robot_contacts()}

@@ -55,6 +55,9 @@ GRIPPER_MAX_FORCE = 100.0
 # [m/s] rate at which the commanded opening moves: the Robotiq 2F-85's highest finger speed (20-150 mm/s).
 GRIPPER_SPEED = 0.15
 
+# Objects of a perceived scene that reach this far into each other were seen twice (ghost_overlaps) [m]: more than
+# the few millimetres perception is off, less than any real object's size.
+OVERLAP_DEPTH = 0.008
 DEFAULT_SETTLE_TIME = 0.5  # [s] of simulated time for objects to come to rest after reset
 
 
@@ -122,14 +125,17 @@ class World:
     # ----------------------------------------------------------------------------------------------- reset
     def reset(self, seed: int, objects: Sequence[ObjectSpec | str] | None = None,
               settle_time: float = DEFAULT_SETTLE_TIME, arm_joints: Sequence[float] | None = None,
-              base_pose: Sequence[float] | None = None) -> list[ObjectState]:
+              base_pose: Sequence[float] | None = None, ghost_overlaps: bool = False) -> list[ObjectState]:
         """Place the objects (default: the scene's episode for this seed) and let them settle.
 
         objects: ObjectSpec or names like "red block" (an empty list: none); specs without a position get one
         sampled from the seed under the spawn rules. The arm goes to the scene's home joints (HOME_JOINT_POSITIONS
         in the table top), or to `arm_joints`, with the gripper open, a mobile base to the scene's start pose or to
-        `base_pose` (x, y, yaw). Returns the settled object states. Raises ValueError for unknown colours or
-        categories, duplicate names, impossible layouts, or joints outside their limits.
+        `base_pose` (x, y, yaw). With `ghost_overlaps` (a twin of a perceived scene), objects placed into each other
+        are not thrown apart: one of each overlapping pair (the one in most overlaps, else the later in the list)
+        becomes a ghost, which nothing touches (ObjectSpec.solid), until none overlap. Returns the settled object
+        states. Raises ValueError for unknown colours or categories, duplicate names, impossible layouts, or joints
+        outside their limits.
         """
         specs = [ObjectSpec.from_name(o) if isinstance(o, str) else o for o in objects] if objects is not None else \
             self.scene.default_objects(seed)
@@ -139,7 +145,7 @@ class World:
         if len(set(names)) != len(names):
             raise ValueError(f'object names must be unique: {names}')
         positions = self.scene.spawn_positions(specs, seed)
-        key = (self.scene_name, tuple((s.name, s.category, s.color_name) for s in specs))
+        key = (self.scene_name, tuple((s.name, s.category, s.color_name, s.solid) for s in specs))
         with self.lock:
             previous_time = 0.0 if self.data is None else float(self.data.time)
             model = self._models.get(key)
@@ -177,6 +183,14 @@ class World:
                 z = max(resting, spec.height if spec.height is not None else resting) + scene_objects.SPAWN_CLEARANCE
                 half = spec.yaw / 2
                 self.data.qpos[adr:adr + 7] = [x, y, z, math.cos(half), 0.0, 0.0, math.sin(half)]
+            if ghost_overlaps:
+                mujoco.mj_forward(self.model, self.data)
+                overlapping = self._overlapping_object()
+                if overlapping is not None:  # placed into another: a double detection, made a ghost
+                    specs = [dataclasses.replace(spec, solid=False) if spec.name == overlapping else spec
+                             for spec in specs]
+                    self.data.time = previous_time  # the clock goes on from where it was, as in any reset
+                    return self.reset(seed, specs, settle_time, arm_joints, base_pose, ghost_overlaps)
             if self.scene.initialize is not None:  # the scene's own seeded start (e.g. a cart-pole's lean)
                 self.scene.initialize(self.model, self.data, seed)
             if self.base is not None:
@@ -713,6 +727,21 @@ class World:
         """The largest joint speed of the whole model, arm, fingers and objects [m/s or rad/s] (is it still?)."""
         with self.lock:
             return float(np.max(np.abs(self.data.qvel))) if self.model.nv else 0.0
+
+    def _overlapping_object(self, depth: float = OVERLAP_DEPTH) -> str | None:
+        """Of the solid objects that reach more than `depth` into another solid object, the one in most such
+        overlaps (ties: the later in the reset's list); None when none do."""
+        model, data = self.model, self.data
+        solid = [spec.name for spec in self.objects if spec.solid]
+        counts = dict.fromkeys(solid, 0)
+        for i, first in enumerate(solid):
+            for second in solid[i + 1:]:
+                if any(mujoco.mj_geomDistance(model, data, int(a), int(b), 0.01, None) < -depth
+                       for a in self._object_geom_ids[first] for b in self._object_geom_ids[second]):
+                    counts[first] += 1
+                    counts[second] += 1
+        worst = max(counts.items(), key=lambda item: (item[1], solid.index(item[0])), default=(None, 0))
+        return worst[0] if worst[1] > 0 else None
 
     def deepest_object_penetration(self) -> tuple[float, str, str]:
         """(depth [m], geom, geom) of the deepest overlap of an object with the table or another object.

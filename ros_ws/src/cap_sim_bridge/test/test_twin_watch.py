@@ -8,8 +8,6 @@ import math
 import numpy as np
 import pytest
 
-from cap_control.kinematics import inverse_kinematics
-from cap_control.pick_place.plan import top_down_pose
 from cap_sim_bridge.objects import ObjectSpec
 from cap_sim_bridge.twin_watch import TwinWatch
 from cap_sim_bridge.world import World
@@ -90,9 +88,9 @@ def test_the_arm_driven_into_the_table_hit_it(world):
     world.reset(0, SCENE)
     watch = TwinWatch(world)
     watch.start()
-    below = inverse_kinematics(top_down_pose((0.15, -0.35, -0.03), 0.0), world.joint_positions())
     start = world.joint_positions()
-    world.follow_trajectory([0.0, 2.0], [start, below])
+    down = start + np.array([0.0, 1.5, 0.0, 0.0, 0.0, 0.0])  # the shoulder swung down: the hand meets the table
+    world.follow_trajectory([0.0, 2.0], [start, down])
     _run(world, watch, 2.5)
     assert any(' hit the table at (' in text for text in watch.findings()), watch.findings()
 
@@ -109,3 +107,23 @@ def test_a_twin_starts_where_the_robot_is(world):
     assert np.allclose(world.joint_positions(), joints, atol=0.01)
     with pytest.raises(ValueError, match='outside their limits'):
         world.reset(0, SCENE, arm_joints=[10.0] * 6)
+
+
+def test_objects_a_twin_is_given_into_each_other_become_ghosts(world):
+    # Perception reported the yellow block twice (once as a gray one) and a gray bowl around a line of blocks.
+    line = [ObjectSpec.from_name(f'{colour} block', (x, -0.7)) for colour, x in (('red', -0.04), ('blue', 0.0),
+                                                                                    ('green', 0.04))]
+    states = world.reset(0, [ObjectSpec.from_name('yellow block', (0.2, -0.5)),
+                             ObjectSpec('gray block', 'block', 'gray', (0.205, -0.5), height=0.02), *line,
+                             ObjectSpec.from_name('gray bowl', (0.0, -0.7)),
+                             ObjectSpec.from_name('purple bowl', (-0.15, -0.45)),
+                             ObjectSpec.from_name('pink block', (-0.15, -0.45))],  # a block in a bowl: no ghost
+                         ghost_overlaps=True)
+    ghosts = {spec.name for spec in world.objects if not spec.solid}
+    assert ghosts == {'gray block', 'gray bowl'}
+    watch = _watch_for(world, 1.0)
+    watch.finish()
+    assert watch.findings() == []  # nothing was thrown apart
+    before = {state.name: state.position for state in states}
+    after = {state.name: state.position for state in world.object_states()}
+    assert all(np.linalg.norm(np.subtract(after[name], before[name])) < 0.005 for name in before)
