@@ -20,7 +20,7 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, out: str, time_limi
                              '--base-url / CAP_LLM_BASE_URL [oracle]')
     parser.add_argument('--backend', choices=('http', 'local'), default='http',
                         help='for --policy llm: http (--base-url) or local (the llama.cpp server and model of `make '
-                             'model`, started for the run and stopped after it; completions API) [http]')
+                             'model`, started for the run and stopped after it) [http]')
     parser.add_argument('--model-file', default='', help='with --backend local: a GGUF file [the default model]')
     parser.add_argument('--model-threads', type=int, default=2,
                         help='with --backend local: server threads [2: no simulator runs beside it]')
@@ -80,7 +80,7 @@ def local_model(args: argparse.Namespace | None) -> Iterator[None]:
                               on_event=lambda message: print(message, file=sys.stderr))
     server.start()  # stops the server itself if it cannot start
     try:
-        args.base_url, args.model, args.api = server.base_url, server.model_name, 'completions'
+        args.base_url, args.model = server.base_url, server.model_name  # --api as given: the server has both
         yield
     finally:
         server.stop()
