@@ -21,6 +21,7 @@ from __future__ import annotations
 import functools
 import math
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
@@ -67,8 +68,14 @@ class TwinVerdict:
     predicted: dict[str, Position] = field(default_factory=dict)  # where the twin left them
     build_s: float = 0.0  # wall time to build the twin [s]
     rehearse_s: float = 0.0  # wall time of the rehearsal, the program's run on the twin included [s]
+    rehearse_from: float = 0.0  # time.monotonic() when the rehearsal began
     simulated_s: float = 0.0  # simulated time of the rehearsal [s]
     image_png: bytes = b''  # the twin's scene at the end
+
+    def end_rehearsal(self) -> None:
+        """The rehearsal is over (passed its gate, or failed on the twin): its time is kept, once."""
+        if not self.rehearse_s:
+            self.rehearse_s = time.monotonic() - self.rehearse_from
 
     def summary(self) -> str:
         """One line for a person: what the rehearsal found, or that it found nothing."""

@@ -392,7 +392,7 @@ class LmpNode(Node):
             result.rehearsed = job.verdict is not None
             if job.verdict is not None:
                 result.twin_build_seconds = float(job.verdict.build_s)
-                result.rehearsal_seconds = float(max(job.verdict.rehearse_s, 0.0))
+                result.rehearsal_seconds = float(job.verdict.rehearse_s)
             result.prediction = wire_text(job.prediction)
             result.prediction_misses = [_prediction_miss(miss) for miss in job.prediction_misses]
         else:
@@ -437,8 +437,8 @@ class LmpNode(Node):
                     continue
                 job.result = self.engine.run(job.command)
                 self.rehearsal.end()
-                if job.verdict is not None and job.verdict.rehearse_s < 0:  # it ended on the twin
-                    job.verdict.rehearse_s += time.monotonic()
+                if job.verdict is not None:  # a rehearsal that failed on the twin ends here
+                    job.verdict.end_rehearsal()
                 if job.verdict is not None and job.result.outcome is Outcome.DONE:
                     self._compare_prediction(job)
                 job.outcome = self._outcome(job)
@@ -518,8 +518,7 @@ class LmpNode(Node):
                                        outcome=Outcome.REFUSED,
                                        message=f'the twin could not be built, so the program did not run: {error}')
             return False
-        job.verdict = TwinVerdict(start=start, build_s=time.monotonic() - started)
-        job.verdict.rehearse_s = -time.monotonic()  # counted from here; completed by the gate
+        job.verdict = TwinVerdict(start=start, build_s=time.monotonic() - started, rehearse_from=time.monotonic())
         self.rehearsal.begin()
         return True
 
@@ -541,7 +540,7 @@ class LmpNode(Node):
         if verdict is not None:
             assert self.twin is not None
             verdict.calls = self.rehearsal.end()  # what the twin received, not what the program says it planned
-            verdict.rehearse_s += time.monotonic()
+            verdict.end_rehearsal()
             try:
                 self.twin.verdict(verdict)
             except RobotApiError as error:
