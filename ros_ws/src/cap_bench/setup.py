@@ -32,6 +32,8 @@ setup(
         'console_scripts': [
         ],
         # `cap bench NAME` (cap_bringup's command line finds benchmarks through this group).
-        'cap_ros.benchmarks': [f'{name} = {package_name}.{name}.bench:main' for name in BENCHMARKS],
+        # `cap bench results` writes the results page from the kept runs of all of them (cap_bench/results.py).
+        'cap_ros.benchmarks': [f'{name} = {package_name}.{name}.bench:main' for name in BENCHMARKS]
+        + [f'results = {package_name}.results:main'],
     },
 )

@@ -93,7 +93,9 @@ def write_oracle_cassette(episodes: Sequence[Any], path: pathlib.Path, lmp: str,
 def episode_record(episode: Any, options: BenchOptions) -> dict:
     """An episode's record before it ran: not a success (episodes of instructions in a scene of named objects)."""
     return {'key': episode.key, 'template': episode.template, 'seed': episode.seed,
-            'instructions': list(episode.instructions), 'policy': options.policy, 'success': False, 'reason': '',
+            'instructions': list(episode.instructions), 'policy': options.policy,
+            'feedback_rounds': options.feedback_rounds if options.policy == 'llm' else 0, 'success': False,
+            'reason': '',
             'code': '', 'outcome': '', 'sim_seconds': 0.0, 'wall_seconds': 0.0, 'model_calls': 0,
             'objects': {o.name: list(o.xy) for o in episode.objects}}
 

@@ -10,6 +10,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from cap_bench.charts import Bar, bar_chart
+from cap_bench.run_facts import run_facts
 
 
 def summarise(records: Sequence[dict], templates: Sequence[str], title: str, policy: str,
@@ -29,7 +30,8 @@ def summarise(records: Sequence[dict], templates: Sequence[str], title: str, pol
                                       'percent': 100.0 * passed / total if total else None},
             'wall_seconds': round(wall_seconds, 1),
             'episode_wall_seconds_median': float(np.median([r['wall_seconds'] for r in records])) if records else 0,
-            'failures': {r['key']: r['reason'] for r in records if not r['success']}}
+            'failures': {r['key']: r['reason'] for r in records if not r['success']},
+            'run': run_facts(records, wall_seconds)}
 
 
 def _figure(value: float | None, form: str) -> str:

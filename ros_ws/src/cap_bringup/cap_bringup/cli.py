@@ -617,6 +617,8 @@ The paper's language-side tables through the engine and the sandbox process (no 
     cap bench codegen                               robot code generation, flat and hierarchical (oracle)
     cap bench humaneval --policy llm --jobs 2       HumanEval with the model at CAP_LLM_BASE_URL
     cap bench reasoning --policy llm                spatial reasoning: code, vanilla and chain-of-thought answers
+The results page, docs/results.md, from the runs kept in results/:
+    cap bench results --add output/bench            keep a run's report, then write the page from all kept runs
 """
 
 

@@ -58,6 +58,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping
 
 from cap_lmp.approval import ApprovalGate, PlannedCall, recorders, session_copy
+from cap_lmp.continuation import continued_program
 from cap_lmp.errors import (CapLLMError, CodeRejected, ExecutionStopped, GenerationError, NotApproved, UndefinedName,
                             UnusableAnswer)
 from cap_lmp.feedback import action_recorders, continue_query, failure_lines, feedback_block, worth_feedback
@@ -495,7 +496,7 @@ class Engine:
             generated = len(self._stats.generated)
             code = self._ask(config, query, context, attempt, feedback)
             if config.answer_continues_query:
-                code = f'{config.query_prefix}{query}{config.query_suffix}{code}'
+                code = continued_program(f'{config.query_prefix}{query}{config.query_suffix}', code)
                 check_program_size(code, 'the query with the answer')
             try:
                 return self._prepare(config, code, context, variables, query)

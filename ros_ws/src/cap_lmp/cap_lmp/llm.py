@@ -70,9 +70,9 @@ _FENCE = re.compile(r'```[ \t]*[\w+-]*[ \t]*\n(.*?)(?:\n[ \t]*```|\Z)', re.DOTAL
 
 def strip_code_fences(text: str) -> str:
     """The code inside Markdown fences (all fenced blocks joined), or the text unchanged if it has none."""
-    blocks = _FENCE.findall(text)
-    if not blocks:
-        return text
+    blocks = [block for block in _FENCE.findall(text) if block.strip()]
+    if not blocks:  # a closing fence alone at the end (the model never opened one) is not code either
+        return re.sub(r'(?:\A|\n)[ \t]*```[ \t]*\s*\Z', '', text)
     return '\n'.join(block.rstrip() for block in blocks)
 
 
@@ -165,8 +165,9 @@ class OpenAICompatibleClient:
         if request.stop and self.api == 'completions':
             payload['stop'] = list(request.stop[:_MAX_STOP_SEQUENCES])
         if self.api == 'chat':
-            payload['messages'] = [{'role': 'system', 'content': self.system_prompt},
-                                   {'role': 'user', 'content': request.prompt}]
+            # No system prompt (''): the model's chat template puts its own default in, as its makers evaluate it.
+            system = [{'role': 'system', 'content': self.system_prompt}] if self.system_prompt else []
+            payload['messages'] = system + [{'role': 'user', 'content': request.prompt}]
             return f'{self.base_url}/chat/completions', payload
         payload['prompt'] = request.prompt
         return f'{self.base_url}/completions', payload

@@ -143,6 +143,13 @@ def test_unreachable_server_is_reported():
 def test_answer_cleaning():
     assert strip_code_fences('Here:\n```python\nx = 1\n```\nand\n```\ny = 2\n```') == 'x = 1\ny = 2'
     assert strip_code_fences('x = 1') == 'x = 1'
+    assert strip_code_fences('def f():\n    return 1\n```\n') == 'def f():\n    return 1'  # a fence never opened
+
+
+def test_an_empty_system_prompt_leaves_the_models_own_default_to_its_chat_template(server):
+    client = OpenAICompatibleClient(server.base_url, 'my-model', system_prompt='', backoff_s=0.01)
+    assert client.complete(request()).text == "say('hello')"
+    assert server.requests[0].body['messages'] == [{'role': 'user', 'content': '# hints\n# say hello.\n'}]
     assert truncate_at_stop('a = 1\n# b\nobjects = [', ('#', 'objects = [')) == 'a = 1\n'
     assert clean_chat_answer("```python\n# put it there.\nput(1)\n# done\n```", ('#',)) == 'put(1)'
     assert clean_chat_answer("```python\nx = 1  # metres\nsay(x)\n# next.\nmore()\n```", ('#',)) == \

@@ -219,7 +219,7 @@ def run(options: PolicyOptions, out: pathlib.Path, *, prompts: Sequence[str] = P
              'A problem passes when the model\'s function gives the reference\'s outputs on every seeded case '
              '(np.allclose, equality or geometric equality), judged on the host.']
     return write_report(out, f'Robot code generation ({len(PROBLEMS)} problems)', policy, rows, notes,
-                        {'wall_s': round(time.monotonic() - started, 2), 'items': len(records)})
+                        {'wall_s': round(time.monotonic() - started, 2), 'items': len(records)}, records)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -23,12 +23,13 @@ from cap_ros_common.actions import ActionClient
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from cap_bench.bench_options import BenchOptions, policy_description
+from cap_bench.bench_options import BenchOptions, lmp_parameters, policy_description
 from cap_bench.charts import Bar, bar_chart
 from cap_bench.controllers import templates
 from cap_bench.controllers.templates import ControllerEpisode, Verdict
 from cap_bench.episode_runs import CASSETTE, show_progress, write_record
 from cap_bench.graph_cli import GraphBench, comma_separated
+from cap_bench.run_facts import run_facts
 from cap_bench.ros_domains import domain_ids, use_own_domain
 from cap_bringup.graph import Graph, GraphOptions
 from cap_control import kinematics
@@ -75,6 +76,7 @@ class Runner:
         self.node = rclpy.create_node('cap_bench_controllers', context=self.context)
         self.graph.executor.add_node(self.node)
         self.timeout_s = episode_timeout_s
+        self.feedback_rounds = int(options.extra.get('lmp_node', {}).get('feedback_rounds', 0))
         self.execute = ActionClient(self.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
         self.reset = self.node.create_client(ResetScene, GraphNames.SIM_RESET_SERVICE)
         self.session = self.node.create_client(Trigger, GraphNames.RESET_SESSION_SERVICE)
@@ -135,7 +137,8 @@ class Runner:
         outcome = '' if answer.outcome == ExecuteCommand.Result.OUTCOME_DONE else answer.message
         record: dict[str, Any] = {'key': item.key, 'template': item.template, 'seed': item.seed,
                                   'instruction': item.instruction, 'code': answer.code,
-                                  'wall_seconds': round(wall, 2), 'model_calls': answer.model_calls}
+                                  'wall_seconds': round(wall, 2), 'model_calls': answer.model_calls,
+                                  'feedback_rounds': self.feedback_rounds}
         if run is None:
             verdict = Verdict(False, outcome or 'no controller ran', {})
         else:
@@ -199,7 +202,7 @@ def report(items: Sequence[dict[str, Any]], policy: str, wall_seconds: float, ou
     passed = sum(item['success'] for item in items)
     summary = {'policy': policy, 'passed': passed, 'total': len(items),
                'percent': round(100.0 * passed / len(items), 1) if items else 0.0,
-               'wall_seconds': round(wall_seconds, 1), 'templates': rows}
+               'wall_seconds': round(wall_seconds, 1), 'templates': rows, 'run': run_facts(items, wall_seconds)}
     (out / 'report.json').write_text(json.dumps(summary, indent=2), encoding='utf-8')
     lines = [f'# Controller benchmark: {policy}', '',
              '| template | passed | % | paper % | call p50 / p99 [ms] | function p50 / p99 [ms] | wall / episode [s] |',
@@ -228,14 +231,11 @@ def run_benchmark(options: BenchOptions, episodes: Sequence[ControllerEpisode], 
     out = pathlib.Path(options.out)
     out.mkdir(parents=True, exist_ok=True)
     graph = GraphOptions(domain=DOMAIN.name, real_time=real_time)
+    graph.llm_backend, lmp = lmp_parameters(options)  # --backend local: the run's server, as an endpoint
+    graph.extra = {'lmp_node': lmp}
     if options.policy == 'oracle':
         write_oracle_cassette(episodes, out / CASSETTE)
         graph.cassette = str(out / CASSETTE)
-    else:
-        graph.llm_backend = 'http'
-        graph.extra = {'lmp_node': {key: value for key, value in (('base_url', options.base_url),
-                                                                  ('model', options.model), ('api', options.api))
-                                    if value}}
     # The graph comes up in this process: keep it on a DDS domain of its own, on this host.
     use_own_domain(domain_ids(1, options.first_domain_id)[0])
     started = time.monotonic()
@@ -288,7 +288,7 @@ class ControllersBench(GraphBench):
 
 BENCH = ControllersBench(name='controllers', description=__doc__.split('\n\n')[0], out=DEFAULT_OUT, trials=5,
                          seed_aliases=('--base-seed',), resume=False, episode_timeout=600.0,
-                         timeout_per='episode (wall time)', default_api='chat', backends=False)
+                         timeout_per='episode (wall time)', default_api='chat')
 
 
 def main(argv: list[str] | None = None) -> int:

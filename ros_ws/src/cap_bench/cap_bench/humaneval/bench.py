@@ -184,7 +184,7 @@ def run(options: PolicyOptions, out: pathlib.Path, *, generations: Sequence[str]
              'Paper figures: Code as Policies, HumanEval with code-davinci-002 (greedy; pass@k at temperature 0.8).']
     return write_report(out, f'HumanEval ({len({parse_key(k)[1] for k in keys})} problems), {sampling}', policy,
                         rows, notes, {'wall_s': round(time.monotonic() - started, 2), 'items': len(records),
-                                      'samples': samples, 'temperature': temperature})
+                                      'samples': samples, 'temperature': temperature}, records)
 
 
 def build_parser() -> argparse.ArgumentParser:

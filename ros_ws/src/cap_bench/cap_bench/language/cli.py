@@ -28,6 +28,9 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, out: str, time_limi
     parser.add_argument('--model', default='', help='for --policy llm; default CAP_LLM_MODEL')
     parser.add_argument('--api', choices=('completions', 'chat'), default='completions',
                         help='the endpoint protocol [completions]')
+    parser.add_argument('--chat-system', choices=('project', 'model'), default='project',
+                        help='with --api chat: the project\'s system prompt, or none so that the model\'s chat '
+                             'template puts in its own default [project]')
     parser.add_argument('--request-timeout', type=float, default=120.0, help='seconds per HTTP attempt [120]')
     parser.add_argument('--jobs', type=int, default=1, help='parallel sessions, i.e. requests in flight [1]')
     parser.add_argument('--out', default=out, help=f'output folder [{out}]')
@@ -52,7 +55,7 @@ def choose(text: str, allowed: Sequence[str], option: str, prog: str) -> list[st
 
 def policy_of(args: argparse.Namespace) -> PolicyOptions:
     return PolicyOptions(policy=args.policy, base_url=args.base_url, model=args.model, api=args.api,
-                         timeout_s=args.request_timeout)
+                         timeout_s=args.request_timeout, chat_system=args.chat_system)
 
 
 class Interrupted(Exception):

@@ -19,6 +19,9 @@ class PolicyOptions:
     model: str = ''  # llm: empty means CAP_LLM_MODEL
     api: str = 'completions'  # 'completions' or 'chat'
     timeout_s: float = 120.0  # per HTTP attempt
+    # chat API: 'project' sends the project's system prompt (cap_lmp.llm); 'model' sends none, so the model's chat
+    # template puts in its own default, as the model's makers evaluate it
+    chat_system: str = 'project'
 
     def describe(self, client: LLMClient | None = None) -> str:
         """A line for reports: which answers these are."""
@@ -26,7 +29,8 @@ class PolicyOptions:
             return 'oracle (reference answers served by a local OpenAI-protocol server)'
         model = getattr(client, 'model', None) or self.model or '(CAP_LLM_MODEL)'
         url = getattr(client, 'base_url', None) or self.base_url or '(CAP_LLM_BASE_URL)'
-        return f'model {model} at {url}, {self.api} API'
+        system = ", the model's own system prompt" if self.api == 'chat' and self.chat_system == 'model' else ''
+        return f'model {model} at {url}, {self.api} API{system}'
 
 
 class SuffixOracle:
@@ -54,7 +58,9 @@ def open_client(options: PolicyOptions, oracle_answers: Sequence[tuple[str, str]
         return
     if options.policy != 'llm':
         raise ValueError(f"policy must be 'oracle' or 'llm', not {options.policy!r}")
-    overrides = {'api': options.api, 'timeout_s': options.timeout_s}
+    overrides: dict[str, object] = {'api': options.api, 'timeout_s': options.timeout_s}
+    if options.chat_system == 'model':
+        overrides['system_prompt'] = ''
     if options.base_url:
         overrides['base_url'] = options.base_url
     if options.model:

@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 from typing import Any, Mapping, Sequence
 
 from cap_bench.charts import Bar, bar_chart
+from cap_bench.run_facts import run_facts
 
 
 @dataclass(frozen=True)
@@ -40,10 +41,12 @@ def _chart_label(row: ReportRow) -> str:
 
 
 def write_report(out_dir: pathlib.Path, title: str, policy: str, rows: Sequence[ReportRow],
-                 notes: Sequence[str] = (), extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """Write the three files; return what report.json holds."""
+                 notes: Sequence[str] = (), extra: Mapping[str, Any] | None = None,
+                 records: Sequence[Mapping[str, Any]] = ()) -> dict[str, Any]:
+    """Write the three files; return what report.json holds (with the run's facts from `records`)."""
+    extra = dict(extra or {})
     summary = {'title': title, 'policy': policy, 'rows': [{**asdict(row), 'percent': row.percent} for row in rows],
-               'notes': list(notes), **(extra or {})}
+               'notes': list(notes), **extra, 'run': run_facts(records, extra.get('wall_s', 0.0))}
     (out_dir / 'report.json').write_text(json.dumps(summary, indent=2), encoding='utf-8')
     lines = [f'# {title}', '', f'Policy: {policy}', '',
              '| variant | group | metric | items | passed | this run % | paper % |', '|---|---|---|---|---|---|---|']

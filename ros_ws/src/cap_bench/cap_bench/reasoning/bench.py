@@ -155,7 +155,7 @@ def run(options: PolicyOptions, out: pathlib.Path, *, styles: Sequence[str] = ST
              'Code as Policies, code-davinci-002 (vanilla 35 %, chain of thought 58 %, code 98 %).']
     return write_report(out, f'Spatial-geometric reasoning ({len(QUESTIONS)} questions): code vs. language',
                         policy, summarise(records, styles), notes,
-                        {'wall_s': round(time.monotonic() - started, 2), 'items': len(records)})
+                        {'wall_s': round(time.monotonic() - started, 2), 'items': len(records)}, records)
 
 
 def build_parser() -> argparse.ArgumentParser:

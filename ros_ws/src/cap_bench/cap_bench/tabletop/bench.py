@@ -102,8 +102,8 @@ def run_benchmark(options: TabletopOptions, show_progress: bool = True) -> dict:
     records = [r for r in load_records(out_dir) if r['key'] in planned]
     title = (f"Table-top benchmark ({policy_name(options)}): perception {options.perception}, "
              f"{options.trials} trial(s) per row")
-    summary = write_report(records, out_dir, title, policy_description(options))
-    summary['wall_seconds_this_run'] = time.monotonic() - started
+    summary = write_report(records, out_dir, title, policy_description(options), time.monotonic() - started)
+    summary['wall_seconds_this_run'] = summary['run']['wall_s']
     summary['episodes'] = len(records)
     return summary
 

@@ -6,6 +6,7 @@ import pathlib
 from typing import Iterable, Mapping
 
 from cap_bench.charts import Bar, bar_chart
+from cap_bench.run_facts import run_facts
 from cap_bench.tabletop.templates import GROUPS
 
 # The Code as Policies paper's simulated table-top results (code-davinci-002), % success per row.
@@ -76,10 +77,12 @@ def chart(summary: Mapping, path: pathlib.Path, title_lines: list[str]) -> None:
     bar_chart(path, title_lines, bars)
 
 
-def write_report(records: list[Mapping], out_dir: pathlib.Path, title: str, policy: str = '') -> dict:
-    """report.json, report.md and report.png; `policy` names who wrote the programs (oracle or which model)."""
+def write_report(records: list[Mapping], out_dir: pathlib.Path, title: str, policy: str = '',
+                 wall_s: float = 0.0) -> dict:
+    """report.json, report.md and report.png; `policy` names who wrote the programs (oracle or which model),
+    `wall_s` the run's wall time."""
     summary = summarise(records)
-    summary.update(title=title, policy=policy)
+    summary.update(title=title, policy=policy, run=run_facts(records, wall_s))
     (out_dir / 'report.json').write_text(json.dumps(summary, indent=2))
     (out_dir / 'report.md').write_text(markdown(summary, title, policy))
     chart(summary, out_dir / 'report.png', [title] + ([f'policy: {policy}'] if policy else []))

@@ -29,6 +29,7 @@ def failed_record(episode: Episode, options: TabletopOptions, reason: str = '') 
     return {'key': episode.key, 'seed': episode.seed,
             'group': episode.group, 'template': episode.template, 'attributes': episode.attributes,
             'instruction': episode.instruction, 'policy': options.policy, 'perception': options.perception,
+            'feedback_rounds': options.feedback_rounds if options.policy == 'llm' else 0,
             'code': '', 'success': False, 'reason': reason, 'sim_seconds': 0.0, 'wall_seconds': 0.0,
             'model_calls': 0, 'prompt_tokens': 0, 'completion_tokens': 0}
 

@@ -37,7 +37,7 @@ _BOUNDED_REPR.maxstring, _BOUNDED_REPR.maxother = 500, 200
 class RosRobotApi:
     """get_obj_names, get_obj_pos and say over ROS, and the plumbing a domain's motions use."""
 
-    surface = 'the table'  # where the objects are, in messages ("there is no ... on the table")
+    where = 'on the table'  # where the objects are, in messages ("there is no ... on the table")
 
     def __init__(self, node: Node, say_publisher, service_timeout_s: float = 5.0,
                  motion_timeout_s: float = 180.0) -> None:
@@ -118,7 +118,7 @@ class RosRobotApi:
         # Made sendable first (a lone surrogate becomes U+FFFD), then quoted.
         shown = repr(wire_text(name, MAX_NAME_CHARS)) if isinstance(name, str) else \
             wire_text(repr(name), MAX_NAME_CHARS)
-        raise RobotApiError(f'there is no {shown} on {self.surface}; the objects are: {", ".join(names) or "none"}')
+        raise RobotApiError(f'there is no {shown} {self.where}; the objects are: {", ".join(names) or "none"}')
 
     def _object(self, name: Any):
         name = self._name(name)

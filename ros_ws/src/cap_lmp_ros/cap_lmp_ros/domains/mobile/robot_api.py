@@ -48,7 +48,7 @@ def pose_stamped(x: float, y: float, yaw: float) -> PoseStamped:
 class RosMobileApi(RosRobotApi):
     """The objects' and locations' names and positions, the robot's pose, driving, picking and placing, say."""
 
-    surface = 'the kitchen'
+    where = 'in the kitchen'
 
     def _create_clients(self, node: Node) -> None:
         super()._create_clients(node)

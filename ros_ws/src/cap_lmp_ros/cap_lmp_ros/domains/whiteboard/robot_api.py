@@ -44,7 +44,7 @@ def stroke_points(pts: Any, verb: str) -> np.ndarray:
 class RosWhiteboardApi(RosRobotApi):
     """get_obj_names, get_obj_pos, draw, erase and say over ROS."""
 
-    surface = 'the board'
+    where = 'on the board'
 
     def _create_clients(self, node: Node) -> None:
         super()._create_clients(node)
