@@ -173,9 +173,10 @@ def _figure(line: Line) -> str:
     return f'{_percent(line.percent)} ({line.passed}/{line.items})'
 
 
-def _tokens(facts: Mapping[str, Any]) -> str:
-    prompt, completion = int(facts.get('prompt_tokens', 0)), int(facts.get('completion_tokens', 0))
-    return f'{prompt:,} + {completion:,}' if prompt or completion else '—'
+def _tokens(run: Run) -> str:
+    """A model's tokens; none for the oracle (its server's counts are not a model's)."""
+    prompt, completion = int(run.facts.get('prompt_tokens', 0)), int(run.facts.get('completion_tokens', 0))
+    return f'{prompt:,} + {completion:,}' if (prompt or completion) and run.who != 'oracle' else '—'
 
 
 def _minutes(seconds: float) -> str:
@@ -184,7 +185,7 @@ def _minutes(seconds: float) -> str:
 
 def _by_benchmark(runs: Iterable[Run]) -> dict[str, list[Run]]:
     grouped: dict[str, list[Run]] = {}
-    for run in runs:
+    for run in sorted(runs, key=lambda run: (run.who != 'oracle', run.name)):  # the oracle first
         grouped.setdefault(run.benchmark, []).append(run)
     order = {name: index for index, name in enumerate(ORDER)}
     return dict(sorted(grouped.items(), key=lambda item: (order.get(item[0], len(ORDER)), item[0])))
@@ -216,7 +217,7 @@ def page(runs: Sequence[Run], image_dir: pathlib.Path, page_dir: pathlib.Path) -
                 if line.headline:
                     out.append(f'| {benchmark} | {line.label} | {_percent(line.paper)} | {run.who} | '
                                f'{run.protocol} | {_figure(line)} | {_minutes(float(run.facts["wall_s"]))} | '
-                               f'{_tokens(run.facts)} | [{run.name}](../results/{run.name}/report.md) |')
+                               f'{_tokens(run)} | [{run.name}](../results/{run.name}/report.md) |')
     for benchmark, mine in grouped.items():
         image = image_dir / f'results-{benchmark}.png'
         _chart(image, benchmark, mine)
@@ -239,7 +240,7 @@ def page(runs: Sequence[Run], image_dir: pathlib.Path, page_dir: pathlib.Path) -
             failures = ', '.join(f'{kind} ({count})' for kind, count in list(facts['failure_kinds'].items())[:6])
             out += [f'[{run.name}]: ../results/{run.name}/report.md',
                     f'- **{run.name}** ({run.title}): `{facts["command"]}`; {facts["items"]} items, '
-                    f'{_minutes(float(facts["wall_s"]))}, tokens {_tokens(facts)}'
+                    f'{_minutes(float(facts["wall_s"]))}, tokens {_tokens(run)}'
                     + (f'; failures: {failures}' if failures else '') + '.' + (f' {run.note}' if run.note else '')]
     return '\n'.join(out) + '\n'
 
