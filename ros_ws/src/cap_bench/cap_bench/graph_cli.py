@@ -200,10 +200,16 @@ class TemplateBench(GraphBench):
     kitchen's): --templates chooses them; `run_templates(options, templates, resume)` runs them."""
     templates: Sequence[str] = ()
     run_templates: Callable[[BenchOptions, Sequence[str], bool], dict] | None = None
+    # The domain's development set (`--set dev`: its commands, --trials times), where it has one.
+    run_devset: Callable[[BenchOptions, bool], dict] | None = None
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
         parser.add_argument('--templates', default=','.join(self.templates),
                             help=f'comma-separated [{",".join(self.templates)}]')
+        if self.run_devset is not None:
+            parser.add_argument('--set', choices=('benchmark', 'dev'), default='benchmark',
+                                help='benchmark: the templates\' episodes; dev: the development set the prompts are '
+                                     'tuned on (--templates does not apply) [benchmark]')
 
     def options(self, args: argparse.Namespace) -> BenchOptions:
         unknown = [t for t in comma_separated(args.templates) if t not in self.templates]
@@ -214,6 +220,8 @@ class TemplateBench(GraphBench):
         return super().options(args)
 
     def run(self, options: BenchOptions, args: argparse.Namespace) -> dict:
+        if getattr(args, 'set', 'benchmark') == 'dev':
+            return self.run_devset(options, args.resume)
         return self.run_templates(options, comma_separated(args.templates), args.resume)
 
     def show(self, summary: dict, args: argparse.Namespace) -> None:

@@ -26,6 +26,7 @@ from cap_bench.bench_options import BenchOptions, policy_description
 from cap_bench.episode_runs import episode_record, load_records, run_episodes
 from cap_bench.graph_cli import TemplateBench
 from cap_bench.graph_client import SERVICE_TIMEOUT_S, GraphClient, outcome_name, prediction_fields
+from cap_bench.whiteboard import devset
 from cap_bench.whiteboard.episodes import TEMPLATES, Episode, oracle_program, sample_episode
 from cap_bench.whiteboard.ink_check import MAX_P95_MM, MIN_COVERAGE, check_drawing, check_erased
 from cap_lmp.safe_text import one_line
@@ -122,8 +123,24 @@ def run_benchmark(options: BenchOptions, templates: Sequence[str], resume: bool 
     return summary
 
 
+def write_dev_cassette(episodes: Sequence[Episode], path: pathlib.Path) -> None:
+    """The development set's reference programs, one per instruction."""
+    episode_runs.write_oracle_cassette(episodes, path, UI_LMP, 'whiteboard', devset.reference_program)
+
+
+def run_devset(options: BenchOptions, resume: bool = False) -> dict:
+    """The development set (cap_bench.whiteboard.devset), `options.trials` times, judged on the ink."""
+    seconds = run_episodes(options, devset.episodes(options.trials), resume, write_dev_cassette, WhiteboardRunner)
+    out = pathlib.Path(options.out)
+    summary = template_report.summarise(load_records(out), list(devset.BY_KEY),
+                                        'Whiteboard development set, judged on the ink', policy_description(options),
+                                        CRITERIA, seconds, _ink_figures)
+    write_report(summary, out)
+    return summary
+
+
 BENCH = TemplateBench(name='whiteboard', description=__doc__.split('\n\n')[0], out=DEFAULT_OUT,
-                      templates=tuple(TEMPLATES), run_templates=run_benchmark)
+                      templates=tuple(TEMPLATES), run_templates=run_benchmark, run_devset=run_devset)
 
 
 def main(argv: list[str] | None = None) -> int:

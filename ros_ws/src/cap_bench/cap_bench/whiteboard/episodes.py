@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Sequence
 
 import numpy as np
 from cap_whiteboard import board, objects as board_objects
@@ -161,6 +162,18 @@ def _sample_objects(rng: np.random.Generator, paths: list[np.ndarray], fixed: li
     return placed
 
 
+def objects_clear_of(paths: Sequence[np.ndarray], seed: int, count: int = 4) -> list[BoardObject]:
+    """`count` of the seed's default objects (blocks first, then fruit), placed where no path comes within
+    CLEARANCE of them (ValueError when they do not fit)."""
+    rng = np.random.default_rng([seed, 23])
+    names = board_objects.default_objects(seed)[:count]
+    for _ in range(100):
+        objects = _sample_objects(rng, list(paths), [], list(names))
+        if objects is not None:
+            return objects
+    raise ValueError(f'{count} objects do not fit clear of the paths (seed {seed})')
+
+
 def _dense(path: np.ndarray, step: float = 0.005) -> np.ndarray:
     out = [path[:1]]
     for start, end in zip(path[:-1], path[1:]):
@@ -232,5 +245,5 @@ def _try_episode(template: str, seed: int, rng: np.random.Generator) -> Episode 
     return Episode(template, seed, instructions, tuple(objects), tuple(targets), tuple(drawn), attributes)
 
 
-__all__ = ['AROUND_MARGIN', 'BoardObject', 'CLEARANCE', 'Episode', 'TEMPLATES', 'oracle_program', 'place_words',
-           'sample_episode']
+__all__ = ['AROUND_MARGIN', 'BoardObject', 'CLEARANCE', 'Episode', 'TEMPLATES', 'objects_clear_of', 'oracle_program',
+           'place_words', 'sample_episode']
