@@ -25,7 +25,7 @@ from std_srvs.srv import Trigger
 
 from cap_bench.bench_options import BenchOptions, lmp_parameters, policy_description
 from cap_bench.charts import Bar, bar_chart
-from cap_bench.controllers import templates
+from cap_bench.controllers import devset, templates
 from cap_bench.controllers.templates import ControllerEpisode, Verdict
 from cap_bench.episode_runs import CASSETTE, show_progress, write_record
 from cap_bench.graph_cli import GraphBench, comma_separated
@@ -266,9 +266,14 @@ class ControllersBench(GraphBench):
         parser.add_argument('--balance-seconds', type=float, default=30.0, help='length of a balance episode [30]')
         parser.add_argument('--real-time', action='store_true', help='simulate in real time (default: as fast as '
                                                                       'possible)')
+        parser.add_argument('--set', choices=('benchmark', 'dev'), default='benchmark',
+                            help='benchmark: the templates\' episodes; dev: the development set the prompts are '
+                                 'tuned on (--templates and --balance-seconds do not apply) [benchmark]')
 
     def episodes(self, args: argparse.Namespace) -> list[ControllerEpisode]:
         """The run's episodes (ValueError for an unknown template)."""
+        if getattr(args, 'set', 'benchmark') == 'dev':
+            return devset.episodes(args.trials)
         return [templates.episode(name, args.seed + trial, args.balance_seconds)
                 for trial in range(args.trials) for name in comma_separated(args.templates)]
 

@@ -30,6 +30,7 @@ from cap_bench.bench_options import BenchOptions, policy_description
 from cap_bench.episode_runs import episode_record, load_records, run_episodes
 from cap_bench.graph_cli import TemplateBench
 from cap_bench.graph_client import GraphClient, outcome_name, prediction_fields
+from cap_bench.mobile import devset
 from cap_bench.mobile.episodes import (TEMPLATES, Episode, oracle_program, rectangle_corners, sample_episode,
                                        square_poses)
 from cap_bringup import base_path
@@ -201,8 +202,24 @@ def run_benchmark(options: BenchOptions, templates: Sequence[str], resume: bool 
     return summary
 
 
+def write_dev_cassette(episodes: Sequence[Episode], path: pathlib.Path) -> None:
+    """The development set's reference programs, one per instruction."""
+    episode_runs.write_oracle_cassette(episodes, path, UI_LMP, 'mobile', devset.reference_program)
+
+
+def run_devset(options: BenchOptions, resume: bool = False) -> dict:
+    """The development set (cap_bench.mobile.devset), `options.trials` times, each command by its kind's judge."""
+    seconds = run_episodes(options, devset.episodes(options.trials), resume, write_dev_cassette, MobileRunner)
+    out = pathlib.Path(options.out)
+    summary = template_report.summarise(
+        load_records(out), devset.KINDS, 'Mobile kitchen development set, by kind', policy_description(options),
+        CRITERIA, seconds, lambda mine: {'sim_seconds_median': float(np.median([r['sim_seconds'] for r in mine]))})
+    write_report(summary, out)
+    return summary
+
+
 BENCH = TemplateBench(name='mobile', description=__doc__.split('\n\n')[0], out=DEFAULT_OUT,
-                      templates=tuple(TEMPLATES), run_templates=run_benchmark)
+                      templates=tuple(TEMPLATES), run_templates=run_benchmark, run_devset=run_devset)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+from typing import Sequence
 
 import numpy as np
 from cap_mobile import layout, objects
@@ -92,7 +93,7 @@ def oracle_program(instruction: str) -> str:
         members = sorted(name for name, g in objects.GROUPS.items() if g == group)
         return (f'surface_pos = get_loc_pos({surface!r})\n'
                 f'names = [name for name in get_obj_names() if name in {members!r} and '
-                f'np.linalg.norm(get_obj_pos(name) - surface_pos) < {_radius(surface):.2f}]\n'
+                f'np.linalg.norm(get_obj_pos(name) - surface_pos) < {surface_radius(surface):.2f}]\n'
                 f'say(f"There are {{len(names)}} {group}s on the {surface}")')
     raise ValueError(f'no reference program for {instruction!r}')
 
@@ -102,7 +103,7 @@ def _variable(label: str) -> str:
     return re.sub(r'\W+', '_', label) + '_pos'
 
 
-def _radius(surface: str) -> float:
+def surface_radius(surface: str) -> float:
     """How far from a surface's centre an object on it can be: half its footprint's diagonal."""
     piece = layout.location(surface)
     return math.hypot(*piece.size[:2]) / 2 + 0.01
@@ -128,6 +129,18 @@ def _scene(seed: int, rng: np.random.Generator, keep_free: tuple[float, float] |
     if keep_free is not None and any(math.dist(p[:2], keep_free) < PLACES_KEPT_FREE for p in placed):
         return None
     return tuple(KitchenObject(name, (round(p[0], 4), round(p[1], 4))) for name, p in zip(names, placed))
+
+
+def kitchen_scene(seed: int, must_have: Sequence[str] = (), keep_free: str = '') -> tuple[KitchenObject, ...]:
+    """The seed's default objects with `must_have` first; with `keep_free` (a surface), that surface's middle stays
+    clear and the first object is not on it (something to bring there)."""
+    rng = np.random.default_rng([seed, 43])
+    free = layout.location(keep_free).centre if keep_free else None
+    for _ in range(100):
+        scene = _scene(seed, rng, keep_free=free, must_have=tuple(must_have))
+        if scene is not None and not (keep_free and objects.surface_of(*scene[0].xy) == keep_free):
+            return scene
+    raise ValueError(f'no scene for seed {seed} with {list(must_have)} off the {keep_free}')
 
 
 def _try_episode(template: str, seed: int, rng: np.random.Generator) -> Episode | None:
@@ -251,5 +264,5 @@ def _try_search(seed: int, rng: np.random.Generator) -> Episode | None:
                    {'around': around, 'side': side, 'object': thing, 'seen_from': seen[thing][1:]})
 
 
-__all__ = ['Episode', 'KitchenObject', 'TEMPLATES', 'oracle_program', 'rectangle_corners', 'sample_episode',
-           'search_instruction', 'square_poses']
+__all__ = ['Episode', 'KitchenObject', 'TEMPLATES', 'kitchen_scene', 'oracle_program', 'rectangle_corners',
+           'sample_episode', 'search_instruction', 'square_poses', 'surface_radius']
