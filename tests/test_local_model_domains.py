@@ -34,10 +34,10 @@ def _assert_done(record: dict) -> None:
 
 
 def test_the_local_model_draws_on_the_whiteboard(own_domain):
+    from cap_bench.whiteboard import devset
     from cap_bench.whiteboard.bench import WhiteboardRunner
-    from cap_bench.whiteboard.episodes import sample_episode
 
-    episode = sample_episode('circle', 1)  # a circle of radius 4 cm at the top side, the fruit and blocks clear of it
+    episode = devset.BY_KEY['square_by_side'].episode()  # a square with 6 cm sides in the middle, objects clear of it
     runner = WhiteboardRunner(LOCAL, None)
     try:
         record = runner.run(episode)
