@@ -542,6 +542,11 @@ class Engine:
         `variables` are set in the program's scope first (e.g. transform_shape_pts(..., shape_pts=pts)).
         """
         config = self.lmps[lmp]
+        # Generated code passes whatever it likes: only text travels as a query (anything else once took the
+        # sandbox process's messages apart and cost the session).
+        for what, value in (('description', query), ('context', context)):
+            if not isinstance(value, str):
+                raise TypeError(f'{lmp}() takes its {what} as text, not {type(value).__name__}')
         bad = [name for name in variables if name.startswith('_')]
         if bad:
             raise ValueError(f'variables passed to {lmp} may not start with "_": {", ".join(bad)}')

@@ -38,6 +38,7 @@ PROGRAMS = {
     'ask the blocks': "blocks = parse_obj_name('the blocks', f'objects = {get_obj_names()}')\nsay(blocks)",
     '# the blocks.': "ret_val = [name for name in objects if 'block' in name]",
     'move slowly': "slow_move()\nsay('after the move')",
+    'ask with a list': "where = [0, 0]\nblocks = parse_obj_name([0, 0], [1, 1])",
 }
 # Quadratic C work on aliased data, each within the sandbox's size limits (test_sandbox_review.QUADRATIC_ATTEMPTS).
 QUADRATIC = {
@@ -87,6 +88,15 @@ def test_a_nested_lmp_call_runs_in_the_sandbox_process(engine, world):
     result = engine.run('ask the blocks')
     assert result.success, result.message
     assert world.said == ["['red block', 'blue block']"] and result.model_calls == 2
+
+
+def test_an_lmp_asked_with_something_other_than_text_is_an_error_and_the_session_stays(engine):
+    pid = engine.pid
+    result = engine.run('ask with a list')
+    assert not result.success and result.error_type == 'TypeError', result.message
+    assert 'parse_obj_name() takes its description as text, not list' in result.message
+    assert engine.pid == pid and engine.restarts == 0
+    assert engine.run('put the red block in the red bowl').success
 
 
 def test_robot_errors_reach_the_program_with_their_message(engine):
