@@ -67,3 +67,22 @@ def test_a_stopped_motion_that_never_answers_names_the_wait_after_the_cancel():
     with pytest.raises(RobotApiError, match=r'within 0.05 s of the cancel'):
         wait_for_future(Future(), 180.0, 'the path-following controller', stop, 0.05, lambda: cancels.append(1))
     assert cancels
+
+
+def test_the_places_the_shape_prompt_names_are_the_boards_own():
+    """parse_shape_pts's prompt says where the named places are; they must be cap_whiteboard.board's PLACES."""
+    import json
+    import re
+
+    from cap_whiteboard import board
+
+    from cap_lmp.prompts import load_prompt
+    from cap_lmp_ros.domains.whiteboard.lmps import PROMPTS_DIR, denormalize_xy
+
+    header = load_prompt(PROMPTS_DIR, 'parse_shape_pts').split('\n\n')[0].replace('\n# ', ' ')
+    named = dict(re.findall(r'the (middle|top left corner) is denormalize_xy\((\[[^\]]+\])\)', header))
+    sides = header.split('the top, bottom, left and right side ')[1].split(';')[0]
+    named.update(zip(('top side', 'bottom side', 'left side', 'right side'), re.findall(r'\[[^\]]+\]', sides)))
+    assert len(named) == 6
+    for place, normalised in named.items():
+        assert np.allclose(denormalize_xy(json.loads(normalised)), board.PLACES[place]), place

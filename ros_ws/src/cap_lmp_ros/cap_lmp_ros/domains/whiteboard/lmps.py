@@ -39,7 +39,8 @@ def whiteboard_lmp_configs() -> list[LMPConfig]:
         LMPConfig('parse_shape_pts', load_prompt(PROMPTS_DIR, 'parse_shape_pts'), stop=('#',), has_return=True,
                   return_val_name='shape_pts', callable_from_code=True),
         LMPConfig('transform_shape_pts', load_prompt(PROMPTS_DIR, 'transform_shape_pts'), stop=('#',),
-                  has_return=True, return_val_name='new_shape_pts', callable_from_code=True),
+                  # the result in the variable it came in: a small model writes `shape_pts = shape_pts + ...`
+                  has_return=True, return_val_name='shape_pts', callable_from_code=True),
         # Parameter names, not the call's values, in the query: a small model copies values into its `def` line.
         LMPConfig('fgen', load_prompt(PROMPTS_DIR, 'fgen'), stop=('# define', '# example'), max_tokens=1024,
                   signature_style='parameters'),
