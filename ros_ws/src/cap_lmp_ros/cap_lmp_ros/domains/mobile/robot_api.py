@@ -150,8 +150,16 @@ class RosMobileApi(RosRobotApi):
         self._manipulate(goal, f'put it down at ({target[0]:.2f}, {target[1]:.2f})')
 
     def place_at_obj(self, name: str) -> None:
-        """Put the held object down on another object."""
-        name = self._name(name)
+        """Put the held object down on another object; given a location's name instead (no object has one), on
+        that location, as place_at_pos(get_loc_pos(name)) would: what was meant is not in doubt."""
+        try:
+            name = self._name(name)
+        except RobotApiError as no_object:
+            try:
+                location = location_name(name)
+            except RobotApiError:
+                raise no_object from None
+            return self.place_at_pos(self.get_loc_pos(location))
         self._manipulate(MobilePickPlace.Goal(task=MobilePickPlace.Goal.TASK_PLACE_AT_OBJECT, object_name=name),
                          f'put it on the {name}')
 
