@@ -143,7 +143,7 @@ class GraphClient:
 
     def run_instructions(self, instructions: Sequence[str], record: dict) -> list | None:
         """Send `instructions` one after another in the session, stopping after the first that does not finish
-        (outcome other than done), counting model calls into record['model_calls']; their results, or None (with
+        (outcome other than done), counting model calls and tokens into the record; their results, or None (with
         record['reason']) when one had no result within the episode's time limit (its goal is cancelled)."""
         results = []
         for instruction in instructions:
@@ -157,6 +157,8 @@ class GraphClient:
                 return None
             results.append(future.result().result)
             record['model_calls'] += results[-1].model_calls
+            for field in ('prompt_tokens', 'completion_tokens'):
+                record[field] = record.get(field, 0) + int(getattr(results[-1], field))
             if results[-1].outcome != self.ExecuteCommand.Result.OUTCOME_DONE:
                 break
         return results

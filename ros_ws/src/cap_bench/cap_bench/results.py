@@ -102,7 +102,9 @@ def _settings(folder: pathlib.Path) -> dict[str, Any]:
 def _benchmark(report: Mapping[str, Any], settings: Mapping[str, Any]) -> str:
     words = str(report.get('run', {}).get('command', '')).split()
     if 'bench' in words[:-1]:
-        return words[words.index('bench') + 1]
+        name = words[words.index('bench') + 1]
+        # a domain's development set (`--set dev`) is a table of its own
+        return f'{name} development set' if ' '.join(words).find('--set dev') >= 0 else name
     return str(settings.get('benchmark', '')) or 'unknown'
 
 
@@ -219,7 +221,7 @@ def page(runs: Sequence[Run], image_dir: pathlib.Path, page_dir: pathlib.Path) -
                                f'{run.protocol} | {_figure(line)} | {_minutes(float(run.facts["wall_s"]))} | '
                                f'{_tokens(run)} | [{run.name}](../results/{run.name}/report.md) |')
     for benchmark, mine in grouped.items():
-        image = image_dir / f'results-{benchmark}.png'
+        image = image_dir / f"results-{benchmark.replace(' ', '-')}.png"
         _chart(image, benchmark, mine)
         out += ['', f'## {benchmark}', '', f'![{benchmark}]({image.relative_to(page_dir).as_posix()})', '']
         labels = list(dict.fromkeys(line.label for run in mine for line in run.lines))

@@ -138,6 +138,7 @@ class Runner:
         record: dict[str, Any] = {'key': item.key, 'template': item.template, 'seed': item.seed,
                                   'instruction': item.instruction, 'code': answer.code,
                                   'wall_seconds': round(wall, 2), 'model_calls': answer.model_calls,
+                                  'prompt_tokens': answer.prompt_tokens, 'completion_tokens': answer.completion_tokens,
                                   'feedback_rounds': self.feedback_rounds}
         if run is None:
             verdict = Verdict(False, outcome or 'no controller ran', {})
