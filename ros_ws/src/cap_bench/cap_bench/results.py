@@ -195,7 +195,7 @@ def _by_benchmark(runs: Iterable[Run]) -> dict[str, list[Run]]:
 
 def _chart(path: pathlib.Path, benchmark: str, runs: Sequence[Run]) -> None:
     """Headline figures of every run of a benchmark, the paper's beside them."""
-    bars = [Bar(f'{run.who[:22]} {line.label}'[:44], line.percent, line.paper,
+    bars = [Bar(f'{run.name}: {line.label}'[:44], line.percent, line.paper,  # the run's folder names it
                 f'{line.passed}/{line.items}', line.label == 'all' or line.label.endswith(', all'))
             for run in runs for line in run.lines if line.headline]
     bar_chart(path, [f'cap bench {benchmark}: every kept run', 'blue: the run; gray: the paper'], bars)
