@@ -42,12 +42,17 @@ def policy_description(options: BenchOptions) -> str:
     return f'{policy_name(options)} at {url}, {options.api} API'
 
 
+def feedback_rounds(options: BenchOptions) -> int:
+    """lmp_node's feedback rounds of the run: a model's, none for the oracle's replayed programs."""
+    return options.feedback_rounds if options.policy == 'llm' else 0
+
+
 def lmp_parameters(options: BenchOptions) -> tuple[str, dict[str, Any]]:
     """(llm backend, lmp_node parameters) of the run's policy: the cassette for the oracle, else the model's."""
     lmp: dict[str, Any] = {'time_limit_s': options.episode_timeout_s}
     backend = 'cassette' if options.policy == 'oracle' else options.backend
     if options.policy == 'llm':
-        lmp['feedback_rounds'] = options.feedback_rounds
+        lmp['feedback_rounds'] = feedback_rounds(options)
     if backend == 'local':  # lmp_node starts and supervises the model server itself
         lmp.update(model_file=options.model_file, model_threads=options.model_threads)
     elif options.policy == 'llm':

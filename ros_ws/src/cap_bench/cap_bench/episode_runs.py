@@ -11,7 +11,7 @@ from typing import IO, Any, Callable, Iterable, Protocol, Sequence
 
 import yaml
 
-from cap_bench.bench_options import BenchOptions
+from cap_bench.bench_options import BenchOptions, feedback_rounds
 from cap_bench.ros_domains import domain_ids, use_own_domain
 from cap_lmp.cassette import FORMAT as CASSETTE_FORMAT, HAND_WRITTEN, normalise_query
 from cap_lmp.safe_text import terminal_text
@@ -94,8 +94,7 @@ def episode_record(episode: Any, options: BenchOptions) -> dict:
     """An episode's record before it ran: not a success (episodes of instructions in a scene of named objects)."""
     return {'key': episode.key, 'template': episode.template, 'seed': episode.seed,
             'instructions': list(episode.instructions), 'policy': options.policy,
-            'feedback_rounds': options.feedback_rounds if options.policy == 'llm' else 0, 'success': False,
-            'reason': '',
+            'feedback_rounds': feedback_rounds(options), 'success': False, 'reason': '',
             'code': '', 'outcome': '', 'sim_seconds': 0.0, 'wall_seconds': 0.0, 'model_calls': 0,
             'objects': {o.name: list(o.xy) for o in episode.objects}}
 

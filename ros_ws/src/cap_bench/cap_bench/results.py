@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import gzip
 import json
 import pathlib
 import shutil
@@ -25,7 +24,7 @@ from cap_bench.run_facts import run_facts
 
 NOTE_FILE = 'note.md'
 KEPT_FILES = ('report.json', 'report.md', 'report.png', 'run.json', 'options.json')
-RECORD_PATTERNS = ('items.jsonl', 'items.jsonl.gz', 'episodes*.jsonl')
+RECORD_PATTERNS = ('items.jsonl', 'episodes*.jsonl')
 # The paper's order of its tables; a benchmark not listed comes after them, by name.
 ORDER = ('tabletop', 'codegen', 'humaneval', 'reasoning', 'whiteboard', 'mobile', 'controllers')
 PAPER_MODEL = 'code-davinci-002'
@@ -104,7 +103,7 @@ def _benchmark(report: Mapping[str, Any], settings: Mapping[str, Any]) -> str:
     if 'bench' in words[:-1]:
         name = words[words.index('bench') + 1]
         # a domain's development set (`--set dev`) is a table of its own
-        return f'{name} development set' if ' '.join(words).find('--set dev') >= 0 else name
+        return f'{name} development set' if '--set dev' in ' '.join(words) else name
     return str(settings.get('benchmark', '')) or 'unknown'
 
 
@@ -136,9 +135,7 @@ def _records(folder: pathlib.Path) -> list[dict[str, Any]]:
     records: list[dict[str, Any]] = []
     for pattern in RECORD_PATTERNS:
         for path in sorted(folder.glob(pattern)):
-            opener = gzip.open if path.suffix == '.gz' else open
-            with opener(path, 'rt', encoding='utf-8') as lines:
-                records += [json.loads(line) for line in lines if line.strip()]
+            records += [json.loads(line) for line in path.read_text(encoding='utf-8').splitlines() if line.strip()]
     return records
 
 

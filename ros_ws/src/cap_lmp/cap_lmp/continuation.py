@@ -15,10 +15,14 @@ import textwrap
 def continued_program(query: str, answer: str) -> str:
     """The program of `query` continued by `answer`; see the module's text. Anything else stays query + answer."""
     plain = query + answer
-    target = _last_function(query)
-    if target is None:
+    try:
+        query_body = ast.parse(query).body
+    except (SyntaxError, ValueError):
         return plain
-    restated = _restated_program(query, answer, target)
+    functions = [node for node in query_body if isinstance(node, ast.FunctionDef)]
+    if not functions:
+        return plain
+    restated = _restated_program(query, query_body, answer, functions[-1])  # the last one is being completed
     if restated is not None:
         return restated
     if answer[:1].strip() and not _compiles(plain):
@@ -43,17 +47,7 @@ def _compiles(source: str) -> bool:
     return True
 
 
-def _last_function(query: str) -> ast.FunctionDef | None:
-    """The query's last top-level function (the one the answer completes), when the query parses."""
-    try:
-        body = ast.parse(query).body
-    except (SyntaxError, ValueError):
-        return None
-    functions = [node for node in body if isinstance(node, ast.FunctionDef)]
-    return functions[-1] if functions else None
-
-
-def _restated_program(query: str, answer: str, target: ast.FunctionDef) -> str | None:
+def _restated_program(query: str, query_body: list[ast.stmt], answer: str, target: ast.FunctionDef) -> str | None:
     """When the answer defines the target function at top level: the query without its unfinished definition, then
     the answer without the query's other functions restated unchanged (so the one definition of each stays)."""
     answer = textwrap.dedent(answer)
@@ -63,7 +57,7 @@ def _restated_program(query: str, answer: str, target: ast.FunctionDef) -> str |
         return None
     if not any(isinstance(node, ast.FunctionDef) and node.name == target.name for node in answer_body):
         return None
-    unchanged = {ast.dump(node) for node in ast.parse(query).body
+    unchanged = {ast.dump(node) for node in query_body
                  if isinstance(node, ast.FunctionDef) and node.name != target.name}
     lines = answer.split('\n')
     for node in reversed(answer_body):  # drop restated helpers, last first so line numbers stay right

@@ -69,14 +69,14 @@ def _wait(predicate, timeout: float, period: float = 0.01) -> bool:
 class Runner:
     """One graph of the controllers domain and a client node; runs episodes one after another."""
 
-    def __init__(self, options: GraphOptions, episode_timeout_s: float) -> None:
+    def __init__(self, options: GraphOptions, episode_timeout_s: float, feedback_rounds: int = 0) -> None:
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.graph = Graph(self.context, options)
         self.node = rclpy.create_node('cap_bench_controllers', context=self.context)
         self.graph.executor.add_node(self.node)
         self.timeout_s = episode_timeout_s
-        self.feedback_rounds = int(options.extra.get('lmp_node', {}).get('feedback_rounds', 0))
+        self.feedback_rounds = feedback_rounds  # recorded per episode: the report's protocol
         self.execute = ActionClient(self.node, ExecuteCommand, GraphNames.EXECUTE_ACTION)
         self.reset = self.node.create_client(ResetScene, GraphNames.SIM_RESET_SERVICE)
         self.session = self.node.create_client(Trigger, GraphNames.RESET_SESSION_SERVICE)
@@ -241,7 +241,7 @@ def run_benchmark(options: BenchOptions, episodes: Sequence[ControllerEpisode], 
     use_own_domain(domain_ids(1, options.first_domain_id)[0])
     started = time.monotonic()
     items: list[dict[str, Any]] = []
-    runner = Runner(graph, options.episode_timeout_s)
+    runner = Runner(graph, options.episode_timeout_s, lmp.get('feedback_rounds', 0))
     try:
         with open(out / ITEMS, 'w', encoding='utf-8') as stream:
             for index, item in enumerate(episodes, 1):

@@ -10,6 +10,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from cap_bench.episode_runs import EpisodeGraph, EpisodeRunner
+from cap_bench.bench_options import feedback_rounds
 from cap_bench.graph_client import SERVICE_TIMEOUT_S, GraphClient, outcome_name, prediction_fields, wait
 from cap_bench.tabletop.episodes import Episode
 from cap_bench.tabletop.options import TabletopOptions, rgbd_camera_rate
@@ -29,7 +30,7 @@ def failed_record(episode: Episode, options: TabletopOptions, reason: str = '') 
     return {'key': episode.key, 'seed': episode.seed,
             'group': episode.group, 'template': episode.template, 'attributes': episode.attributes,
             'instruction': episode.instruction, 'policy': options.policy, 'perception': options.perception,
-            'feedback_rounds': options.feedback_rounds if options.policy == 'llm' else 0,
+            'feedback_rounds': feedback_rounds(options),
             'code': '', 'success': False, 'reason': reason, 'sim_seconds': 0.0, 'wall_seconds': 0.0,
             'model_calls': 0, 'prompt_tokens': 0, 'completion_tokens': 0}
 
